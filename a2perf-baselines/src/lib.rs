@@ -1,0 +1,1 @@
+//! a2perf-baselines (under construction).

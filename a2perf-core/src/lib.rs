@@ -1,0 +1,55 @@
+//! # a2perf-core
+//!
+//! The traits and plumbing of the A2Perf benchmark, with no domain knowledge:
+//!
+//! - [`Env`] / [`EnvSpec`] / [`Step`]: environments with Gymnasium semantics, stepped in place
+//!   without allocation; [`VecEnv`] steps many of them over the machine's cores.
+//! - [`Space`], [`Observation`], [`Action`]: discrete (with action masks), box and dict spaces.
+//! - [`Policy`], [`Algorithm`], [`TrainingContext`]: how algorithms train and report their curves
+//!   and checkpoints; [`rollout`] runs one episode.
+//! - [`Meter`]: anything that measures a phase, composable with [`MeterSet`].
+//! - [`Registry`]: environment ids and algorithm names mapped to typed constructors.
+//! - [`RngStream`]: every random number, keyed by (seed, purpose).
+//! - [`config`]: RON experiment files with includes, overrides and precise errors.
+//! - [`results`]: atomic result files and resumable run directories.
+//!
+//! ```
+//! use a2perf_core::{RngStream, Space};
+//! let mut rng = RngStream::new(0, "example");
+//! let action = Space::Discrete { n: 4 }.sample(&mut rng, Some(&[false, true, false, false]));
+//! assert_eq!(action, Some(a2perf_core::Action::Discrete(1)));
+//! ```
+//!
+//! It deliberately does not contain environments, metrics or learning code: those live in the
+//! domain, metrics and baselines crates, which depend on this one.
+
+#![warn(missing_docs)]
+
+pub mod env;
+pub mod meter;
+pub mod policy;
+pub mod registry;
+pub mod results;
+pub mod rng;
+pub mod rollout;
+pub mod space;
+pub mod value;
+pub mod vec_env;
+
+pub use env::{Env, EnvError, EnvSpec, Info, Step};
+pub use meter::{Measurement, Meter, MeterError, MeterReport, MeterSet, Provenance};
+pub use policy::{
+    Algorithm, CancelToken, Checkpoint, CheckpointSink, Control, CurvePoint, DirectoryCheckpoints,
+    DiscardCheckpoints, EnvFactory, LearningCurve, Policy, PolicyError, PolicyLoader, RandomPolicy,
+    RunError, TrainingContext, TrainingSettings,
+};
+pub use registry::{
+    AlgorithmConstructor, AlgorithmEntry, EnvConstructor, EnvEntry, Registry, RegistryError,
+    TaskRef,
+};
+pub use results::{RunDir, RunState, RunStatus, write_atomic, write_json_atomic};
+pub use rng::RngStream;
+pub use rollout::{ActMode, Episode, Transition, rollout};
+pub use space::{Action, Observation, Space, Tensor};
+pub use value::{ParamError, ParamKind, ParamSpec, Params, Value, did_you_mean};
+pub use vec_env::{VecEnv, VecStep};

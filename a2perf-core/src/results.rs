@@ -1,0 +1,204 @@
+//! Results on disk: atomic writes and run directories that know whether they completed.
+//!
+//! Layout: `EXPERIMENT/RUN/…` with one run directory per (task, algorithm, seed). A run directory
+//! holds `status.json` (`{"state": "running" | "complete", …}`); files are written with
+//! [`write_atomic`] (temp file + rename), so a killed run loses at most the work in flight.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// Errors reading or writing results.
+#[derive(Debug, thiserror::Error)]
+pub enum ResultsError {
+    /// An i/o error on a named path.
+    #[error("{path}: {source}")]
+    Io {
+        /// The path.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A results file exists but cannot be decoded.
+    #[error("{path}: corrupt results file: {reason}")]
+    Corrupt {
+        /// The path.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed and synced,
+/// then renamed over the target.
+///
+/// ```
+/// let dir = std::env::temp_dir().join(format!("a2perf-doc-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir).unwrap();
+/// let p = dir.join("x.json");
+/// a2perf_core::write_atomic(&p, b"{}").unwrap();
+/// assert_eq!(std::fs::read(&p).unwrap(), b"{}");
+/// # std::fs::remove_dir_all(&dir).unwrap();
+/// ```
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path.file_name().ok_or_else(|| {
+        std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")
+    })?;
+    let tmp = dir.join(format!(
+        ".{}.tmp-{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path).inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })
+}
+
+/// Serialises `value` as pretty JSON and writes it atomically.
+pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), ResultsError> {
+    let bytes = serde_json::to_vec_pretty(value).map_err(|e| ResultsError::Corrupt {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    write_atomic(path, &bytes).map_err(|source| ResultsError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Reads and decodes a JSON results file.
+pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ResultsError> {
+    let bytes = std::fs::read(path).map_err(|source| ResultsError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    serde_json::from_slice(&bytes).map_err(|e| ResultsError::Corrupt {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })
+}
+
+/// State of a run directory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunState {
+    /// Started but not finished (possibly killed).
+    Running,
+    /// Finished; all results present.
+    Complete,
+}
+
+/// Contents of `status.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunStatus {
+    /// State.
+    pub state: RunState,
+    /// Free-form note (e.g. the phase reached).
+    #[serde(default)]
+    pub note: String,
+}
+
+/// One run's directory.
+#[derive(Clone, Debug)]
+pub struct RunDir {
+    path: PathBuf,
+}
+
+impl RunDir {
+    /// The run directory at `path` (not created yet).
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        Self { path: path.into() }
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// A file inside it.
+    pub fn file(&self, name: &str) -> PathBuf {
+        self.path.join(name)
+    }
+
+    /// Creates the directory and marks it running.
+    pub fn begin(&self) -> Result<(), ResultsError> {
+        std::fs::create_dir_all(&self.path).map_err(|source| ResultsError::Io {
+            path: self.path.clone(),
+            source,
+        })?;
+        self.set_status(RunState::Running, "")
+    }
+
+    /// Writes `status.json`.
+    pub fn set_status(&self, state: RunState, note: &str) -> Result<(), ResultsError> {
+        write_json_atomic(
+            &self.file("status.json"),
+            &RunStatus {
+                state,
+                note: note.into(),
+            },
+        )
+    }
+
+    /// The recorded status; `None` when the run never started.
+    pub fn status(&self) -> Result<Option<RunStatus>, ResultsError> {
+        let p = self.file("status.json");
+        if !p.exists() {
+            return Ok(None);
+        }
+        read_json(&p).map(Some)
+    }
+
+    /// Whether the run completed (so a rerun skips it).
+    pub fn is_complete(&self) -> Result<bool, ResultsError> {
+        Ok(self
+            .status()?
+            .is_some_and(|s| s.state == RunState::Complete))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_dir_records_completion() {
+        let tmp = tempfile::tempdir().unwrap();
+        let run = RunDir::new(tmp.path().join("run"));
+        assert!(!run.is_complete().unwrap());
+        run.begin().unwrap();
+        assert_eq!(run.status().unwrap().unwrap().state, RunState::Running);
+        assert!(!run.is_complete().unwrap());
+        run.set_status(RunState::Complete, "done").unwrap();
+        assert!(run.is_complete().unwrap());
+    }
+
+    #[test]
+    fn corrupt_status_is_an_error_naming_the_file() {
+        let tmp = tempfile::tempdir().unwrap();
+        let run = RunDir::new(tmp.path());
+        std::fs::write(run.file("status.json"), b"{not json").unwrap();
+        let err = run.status().unwrap_err().to_string();
+        assert!(err.contains("status.json"), "{err}");
+    }
+
+    #[test]
+    fn atomic_write_replaces_and_leaves_no_temp_files() {
+        let tmp = tempfile::tempdir().unwrap();
+        let p = tmp.path().join("a.txt");
+        write_atomic(&p, b"one").unwrap();
+        write_atomic(&p, b"two").unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"two");
+        assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 1);
+    }
+}
