@@ -26,6 +26,52 @@ pub enum Value {
 }
 
 impl Value {
+    /// Parses a command-line literal: `true`/`false`, `None`, integers, floats, quoted strings,
+    /// `[a, b]` lists of those; anything else is taken as a bare string.
+    ///
+    /// ```
+    /// use a2perf_core::Value;
+    /// assert_eq!(Value::parse_literal("3"), Value::Int(3));
+    /// assert_eq!(Value::parse_literal("1e-4"), Value::Float(1e-4));
+    /// assert_eq!(Value::parse_literal("simulated"), Value::Str("simulated".into()));
+    /// assert_eq!(Value::parse_literal("\"a b\""), Value::Str("a b".into()));
+    /// assert_eq!(Value::parse_literal("[1, 2.5]"), Value::List(vec![Value::Int(1), Value::Float(2.5)]));
+    /// ```
+    pub fn parse_literal(text: &str) -> Value {
+        let t = text.trim();
+        match t {
+            "true" => return Value::Bool(true),
+            "false" => return Value::Bool(false),
+            "None" | "none" | "()" => return Value::Null,
+            _ => {}
+        }
+        if let Ok(i) = t.parse::<i64>() {
+            return Value::Int(i);
+        }
+        if t.chars()
+            .next()
+            .is_some_and(|c| c.is_ascii_digit() || c == '-' || c == '+' || c == '.')
+            && let Ok(f) = t.parse::<f64>()
+        {
+            return Value::Float(f);
+        }
+        if t.len() >= 2 && t.starts_with('"') && t.ends_with('"') {
+            return Value::Str(
+                t[1..t.len() - 1]
+                    .replace("\\\"", "\"")
+                    .replace("\\\\", "\\"),
+            );
+        }
+        if t.starts_with('[') && t.ends_with(']') {
+            let inner = t[1..t.len() - 1].trim();
+            if inner.is_empty() {
+                return Value::List(Vec::new());
+            }
+            return Value::List(inner.split(',').map(Value::parse_literal).collect());
+        }
+        Value::Str(t.to_string())
+    }
+
     /// The type's name as used in error messages.
     pub fn type_name(&self) -> &'static str {
         match self {
