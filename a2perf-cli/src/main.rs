@@ -4,7 +4,13 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod circuit_cmd;
+mod config_cmd;
+mod locomotion_cmd;
+mod metrics_cmd;
+mod pipeline_cmd;
 mod registry;
+mod web_cmd;
 
 /// A2Perf: a benchmark for autonomous agents on chip placement, web navigation and quadruped
 /// locomotion, scored on data cost, application performance, system resources and reliability.
@@ -21,6 +27,28 @@ enum Command {
     List,
     /// Step an environment with uniformly random legal actions and report its speed.
     Bench(bench::BenchArgs),
+    /// Inspect experiment configs (`config show FILE [--set key=value ...]`).
+    Config(config_cmd::ConfigArgs),
+    /// Web navigation: render generated websites, report on design files.
+    Web(web_cmd::WebArgs),
+    /// Quadruped locomotion: render rollouts.
+    Locomotion(locomotion_cmd::LocomotionArgs),
+    /// Chip placement: placement cost, netlist generation, placement pictures.
+    Circuit(circuit_cmd::CircuitArgs),
+    /// Score your own logs: reliability metrics and IQM confidence intervals.
+    Metrics(metrics_cmd::MetricsArgs),
+    /// Train one run per (task, algorithm, seed); resumable, shardable (`--shard i/N`).
+    Train(pipeline_cmd::TrainArgs),
+    /// Roll out trained policies and time their inference (RAM, power, energy too).
+    Infer(pipeline_cmd::InferArgs),
+    /// Roll out trained policies on every task of their domain's generalization suite.
+    Generalize(pipeline_cmd::GeneralizeArgs),
+    /// The paper's tables, radar plots, curves and a leaderboard entry from result directories.
+    Report(pipeline_cmd::ReportArgs),
+    /// Train, infer, generalize and report in one go (e.g. `a2perf run configs/quickstart.ron`).
+    Run(pipeline_cmd::RunArgs),
+    /// Evaluate checkpoints, assign expertise levels and collect offline datasets.
+    Collect(pipeline_cmd::CollectArgs),
     // DOMAIN-SUBCOMMANDS (helpers add their variants above this line)
 }
 
@@ -35,11 +63,19 @@ fn main() {
 fn run(cli: Cli) -> Result<()> {
     let registry = registry::full_registry();
     match cli.command {
-        Command::List => {
-            registry::print_list(&registry);
-            Ok(())
-        }
+        Command::List => Ok(registry::print_list(&registry)?),
         Command::Bench(args) => bench::run(&registry, &args),
+        Command::Config(args) => config_cmd::run(&registry, &args),
+        Command::Web(args) => web_cmd::run(&args),
+        Command::Locomotion(args) => locomotion_cmd::run(&registry, &args),
+        Command::Circuit(args) => circuit_cmd::run(&args),
+        Command::Metrics(args) => metrics_cmd::run(&args),
+        Command::Train(args) => pipeline_cmd::train(&registry, &args),
+        Command::Infer(args) => pipeline_cmd::infer(&registry, &args),
+        Command::Generalize(args) => pipeline_cmd::generalize(&registry, &args),
+        Command::Report(args) => pipeline_cmd::report(&args),
+        Command::Run(args) => pipeline_cmd::run(&registry, &args),
+        Command::Collect(args) => pipeline_cmd::collect(&registry, &args),
         // DOMAIN-DISPATCH (helpers add their match arms above this line)
     }
 }

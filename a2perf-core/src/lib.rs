@@ -6,7 +6,7 @@
 //!   without allocation; [`VecEnv`] steps many of them over the machine's cores.
 //! - [`Space`], [`Observation`], [`Action`]: discrete (with action masks), box and dict spaces.
 //! - [`Policy`], [`Algorithm`], [`TrainingContext`]: how algorithms train and report their curves
-//!   and checkpoints; [`rollout`] runs one episode.
+//!   and checkpoints; [`rollout()`](crate::rollout::rollout) runs one episode.
 //! - [`Meter`]: anything that measures a phase, composable with [`MeterSet`].
 //! - [`Registry`]: environment ids and algorithm names mapped to typed constructors.
 //! - [`RngStream`]: every random number, keyed by (seed, purpose).
@@ -25,6 +25,7 @@
 
 #![warn(missing_docs)]
 
+pub mod config;
 pub mod env;
 pub mod meter;
 pub mod policy;
@@ -36,6 +37,7 @@ pub mod space;
 pub mod value;
 pub mod vec_env;
 
+pub use config::{ConfigError, Experiment, Override};
 pub use env::{Env, EnvError, EnvSpec, Info, Step};
 pub use meter::{Measurement, Meter, MeterError, MeterReport, MeterSet, Provenance};
 pub use policy::{

@@ -1,0 +1,231 @@
+//! Behavioural cloning: supervised learning of the demonstrator's action — masked cross-entropy
+//! for discrete actions, Gaussian negative log-likelihood (learned state-independent std) or
+//! mean-squared error for continuous ones.
+//!
+//! BC consumes no environment steps. Its budget `total_env_steps` counts *dataset samples drawn*
+//! (so `total_env_steps / batch_size` gradient steps), and its curve's x axis is samples drawn; the
+//! environment is used only to evaluate the policy.
+
+use std::sync::Arc;
+
+use a2perf_core::{
+    Action, Algorithm, Control, ParamKind, ParamSpec, Params, Policy, RunError, TrainingContext,
+    Value,
+};
+
+use crate::batch::{ObsBatch, ObsLayout};
+use crate::common::*;
+use crate::dataset::{DatasetError, DatasetLoader, JsonDatasetFile};
+use crate::model::NetOptions;
+use crate::nn::dist::{gaussian, masked};
+use crate::nn::optim::{Adam, LrSchedule};
+use crate::nn::{MlpWs, clip_grad_norm, ensure};
+use crate::policy::{Head, NetPolicy, ObsNorm};
+
+/// BC hyperparameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BcConfig {
+    /// Learning-rate schedule.
+    pub lr: LrSchedule,
+    /// Minibatch size.
+    pub batch_size: usize,
+    /// Continuous loss: Gaussian NLL (`true`) or MSE on the mean.
+    pub nll: bool,
+    /// Normalise observations with the dataset's statistics.
+    pub normalize_observations: bool,
+    /// Gradient-norm clip.
+    pub max_grad_norm: f32,
+    /// Initial log-std (continuous).
+    pub init_log_std: f32,
+    /// Networks.
+    pub net: NetOptions,
+}
+
+/// Behavioural cloning from a [`DatasetLoader`].
+#[derive(Clone)]
+pub struct Bc {
+    /// Hyperparameters.
+    pub config: BcConfig,
+    /// Where the demonstrations come from.
+    pub loader: Option<Arc<dyn DatasetLoader>>,
+}
+
+impl Bc {
+    /// Documented hyperparameters (paper: batch 128, lr 1e-4 web / 1e-3 circuit).
+    pub fn params() -> Vec<ParamSpec> {
+        let mut v = vec![
+            ParamSpec::new("learning_rate", ParamKind::Float, Value::Float(1e-4), "Adam learning rate (paper: 1e-4 web, 1e-3 circuit)"),
+            ParamSpec::new("batch_size", ParamKind::Int, Value::Int(128), "minibatch size (paper: 128)"),
+            ParamSpec::new("loss", ParamKind::Choice(&["nll", "mse"]), Value::Str("nll".into()), "continuous actions: Gaussian negative log-likelihood or mean-squared error (discrete: cross-entropy)"),
+            ParamSpec::new("dataset", ParamKind::Path, Value::Null, "JSON dataset file (see `Dataset::save_json`); pipelines may supply a loader instead"),
+            ParamSpec::new("normalize_observations", ParamKind::Bool, Value::Bool(true), "normalise observations with the dataset's statistics"),
+            ParamSpec::new("max_grad_norm", ParamKind::Float, Value::Float(1.0), "global gradient-norm clipping, 0 = off"),
+            ParamSpec::new("init_log_std", ParamKind::Float, Value::Float(-0.5), "initial log-std of the Gaussian policy (continuous actions)"),
+        ];
+        v.extend(schedule_specs());
+        v.extend(net_specs(&[64, 64]));
+        v
+    }
+
+    /// Builds BC from resolved hyperparameters.
+    pub fn from_params(p: &Params) -> Result<Self, RunError> {
+        let lr = positive_f32(p, "learning_rate")?;
+        let loader = p
+            .opt_str("dataset")
+            .map_err(hp)?
+            .map(|path| Arc::new(JsonDatasetFile(path.into())) as Arc<dyn DatasetLoader>);
+        Ok(Self {
+            config: BcConfig {
+                lr: schedule(p, lr)?,
+                batch_size: positive_usize(p, "batch_size")?,
+                nll: p.str("loss").map_err(hp)? == "nll",
+                normalize_observations: p.bool("normalize_observations").map_err(hp)?,
+                max_grad_norm: nonneg_f32(p, "max_grad_norm")?,
+                init_log_std: p.f64("init_log_std").map_err(hp)? as f32,
+                net: net_options(p)?,
+            },
+            loader,
+        })
+    }
+
+    /// Uses `loader` for the demonstrations.
+    pub fn with_loader(mut self, loader: Arc<dyn DatasetLoader>) -> Self {
+        self.loader = Some(loader);
+        self
+    }
+}
+
+fn data_err(e: DatasetError) -> RunError {
+    RunError::InvalidHyperparameter {
+        name: "dataset".into(),
+        reason: e.to_string(),
+    }
+}
+
+impl Algorithm for Bc {
+    fn name(&self) -> &str {
+        "bc"
+    }
+
+    fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
+        let cfg = self.config.clone();
+        let loader = self.loader.clone().ok_or_else(|| {
+            invalid("dataset", "behavioural cloning needs demonstrations: set `dataset` to a JSON dataset file")
+        })?;
+        let spec = ctx.make_env(0)?.spec().clone();
+        let data = loader.load(&spec).map_err(data_err)?;
+        if data.is_empty() {
+            return Err(data_err(DatasetError::Mismatch { env: spec.id.clone(), reason: "the dataset is empty".into() }));
+        }
+        let layout = ObsLayout::from_spec(&spec)?;
+        let head = head_for(&spec, &layout, &cfg.net, false)?;
+        let act_dim = match &head {
+            Head::Gaussian(g) => g.act_dim,
+            _ => 0,
+        };
+        let n_actions = layout.num_actions.unwrap_or(0);
+        let mut store = ObsBatch::new(&layout);
+        store.resize(data.len());
+        let mut act_d = vec![0usize; data.len()];
+        let mut act_c = vec![0.0f32; data.len() * act_dim];
+        for (i, s) in data.samples.iter().enumerate() {
+            store.write_row(i, &s.observation)?;
+            let mismatch = |reason: String| data_err(DatasetError::Mismatch { env: spec.id.clone(), reason });
+            match (&s.action, act_dim) {
+                (Action::Discrete(a), 0) => {
+                    if *a >= n_actions || !store.mask(i).is_none_or(|m| m[*a]) {
+                        return Err(mismatch(format!("sample {i}: action {a} is out of range or masked out")));
+                    }
+                    act_d[i] = *a;
+                }
+                (Action::Continuous(v), d) if v.len() == d && d > 0 => {
+                    act_c[i * d..(i + 1) * d].copy_from_slice(v);
+                }
+                _ => return Err(mismatch(format!("sample {i}: action {:?} does not fit the action space", s.action))),
+            }
+        }
+        let mut init_rng = ctx.rng("bc/init");
+        let params = match &head {
+            Head::Discrete(net) => net.init_params(&mut init_rng),
+            Head::Gaussian(g) => g.init_params(&mut init_rng, cfg.init_log_std),
+            Head::Squashed(_) => return Err(RunError::Unsupported("squashed head".into())),
+        };
+        let mut obs_norm = if cfg.normalize_observations { ObsNorm::for_head(&head, &layout) } else { None };
+        if let Some(n) = &mut obs_norm {
+            n.update(&store, data.len());
+            for i in 0..data.len() {
+                n.apply(&mut store, i);
+            }
+        }
+        let mut policy = NetPolicy::new("bc", &spec, head, params, obs_norm, ctx.seed())?;
+        let mut adam = Adam::new(policy.params.len());
+        let mut grads = vec![0.0f32; policy.params.len()];
+        let mut rng = ctx.rng("bc/minibatch");
+        let mut mb = ObsBatch::new(&layout);
+        let mut idx: Vec<usize> = Vec::new();
+        let (mut x, mut ws, mut dl, mut lp) = (Vec::new(), MlpWs::default(), Vec::new(), Vec::new());
+        let mut dlog_std = vec![0.0f32; act_dim];
+        let total = ctx.settings().total_env_steps.max(1);
+        let mut samples = 0u64;
+        loop {
+            let b = cfg.batch_size;
+            idx.clear();
+            idx.extend((0..b).map(|_| rng.index(data.len())));
+            mb.gather(&store, &idx);
+            let inv = 1.0 / b as f32;
+            grads.fill(0.0);
+            match &mut policy.head {
+                Head::Discrete(net) => {
+                    net.forward(&policy.params, &mb);
+                    ensure(&mut dl, b * n_actions);
+                    dl[..b * n_actions].fill(0.0);
+                    ensure(&mut lp, n_actions);
+                    for (k, &r) in idx.iter().enumerate() {
+                        let l = &mut lp[..n_actions];
+                        masked::log_softmax(&net.logits()[k * n_actions..(k + 1) * n_actions], mb.mask(k), l);
+                        // Cross-entropy: −log p(a).
+                        masked::grad_logp(l, act_d[r], -inv, &mut dl[k * n_actions..(k + 1) * n_actions]);
+                    }
+                    net.backward(&policy.params, &mut grads, &mb, &dl, None);
+                }
+                Head::Gaussian(g) => {
+                    mb.concat_into(&mut x);
+                    let mean = g.actor.forward(&policy.params, &x, b, &mut ws);
+                    let log_std = &policy.params[g.log_std..g.log_std + act_dim];
+                    ensure(&mut dl, b * act_dim);
+                    dl[..b * act_dim].fill(0.0);
+                    dlog_std.fill(0.0);
+                    for (k, &r) in idx.iter().enumerate() {
+                        let m = &mean[k * act_dim..(k + 1) * act_dim];
+                        let a = &act_c[r * act_dim..(r + 1) * act_dim];
+                        let d = &mut dl[k * act_dim..(k + 1) * act_dim];
+                        if cfg.nll {
+                            gaussian::grad_log_prob(m, log_std, a, -inv, d, &mut dlog_std);
+                        } else {
+                            for j in 0..act_dim {
+                                d[j] = 2.0 * (m[j] - a[j]) * inv / act_dim as f32;
+                            }
+                        }
+                    }
+                    g.actor.backward(&policy.params, &mut grads, &x, &dl, &mut ws, None);
+                    for (j, v) in dlog_std.iter().enumerate() {
+                        grads[g.log_std + j] += v;
+                    }
+                }
+                Head::Squashed(_) => {}
+            }
+            clip_grad_norm(&mut grads, cfg.max_grad_norm);
+            adam.step(&mut policy.params, &grads, cfg.lr.at(samples as f64 / total as f64));
+            samples += b as u64;
+            if adam.steps().is_multiple_of(100) {
+                check_finite("BC parameters", &policy.params)?;
+            }
+            if ctx.progress(samples, &mut policy)? == Control::Stop {
+                break;
+            }
+        }
+        check_finite("BC parameters", &policy.params)?;
+        ctx.finish(samples, &mut policy)?;
+        Ok(Box::new(policy))
+    }
+}

@@ -1,0 +1,181 @@
+//! Pieces shared by the algorithms: hyperparameter reading, environment setup, network choice.
+
+use a2perf_core::{
+    EnvSpec, ParamKind, ParamSpec, Params, RunError, Space, TrainingContext, Value, VecEnv,
+};
+
+use crate::batch::ObsLayout;
+use crate::model::{DiscreteNet, GaussianArch, NetOptions};
+use crate::nn::optim::LrSchedule;
+use crate::policy::Head;
+
+pub(crate) fn hp(e: a2perf_core::ParamError) -> RunError {
+    RunError::InvalidHyperparameter {
+        name: match &e {
+            a2perf_core::ParamError::Unknown { key, .. }
+            | a2perf_core::ParamError::WrongType { key, .. }
+            | a2perf_core::ParamError::Missing { key, .. } => key.clone(),
+        },
+        reason: e.to_string(),
+    }
+}
+
+pub(crate) fn invalid(name: &str, reason: &str) -> RunError {
+    RunError::InvalidHyperparameter {
+        name: name.into(),
+        reason: reason.into(),
+    }
+}
+
+pub(crate) fn positive_f32(p: &Params, name: &str) -> Result<f32, RunError> {
+    let v = p.f64(name).map_err(hp)?;
+    if !(v.is_finite() && v > 0.0) {
+        return Err(invalid(name, "must be a positive number"));
+    }
+    Ok(v as f32)
+}
+
+pub(crate) fn unit_f32(p: &Params, name: &str) -> Result<f32, RunError> {
+    let v = p.f64(name).map_err(hp)?;
+    if !(0.0..=1.0).contains(&v) {
+        return Err(invalid(name, "must be in [0, 1]"));
+    }
+    Ok(v as f32)
+}
+
+pub(crate) fn nonneg_f32(p: &Params, name: &str) -> Result<f32, RunError> {
+    let v = p.f64(name).map_err(hp)?;
+    if !(v.is_finite() && v >= 0.0) {
+        return Err(invalid(name, "must be a non-negative number"));
+    }
+    Ok(v as f32)
+}
+
+pub(crate) fn positive_usize(p: &Params, name: &str) -> Result<usize, RunError> {
+    let v = p.usize(name).map_err(hp)?;
+    if v == 0 {
+        return Err(invalid(name, "must be at least 1"));
+    }
+    Ok(v)
+}
+
+/// Hyperparameters of the networks, shared by every algorithm.
+pub(crate) fn net_specs(default_hidden: &[i64]) -> Vec<ParamSpec> {
+    vec![
+        ParamSpec::new(
+            "architecture",
+            ParamKind::Choice(&["auto", "mlp"]),
+            Value::Str("auto".into()),
+            "network: `auto` picks the web/circuit encoders from the observation tensors, `mlp` always flattens",
+        ),
+        ParamSpec::new(
+            "hidden_sizes",
+            ParamKind::IntList,
+            Value::List(default_hidden.iter().map(|h| Value::Int(*h)).collect()),
+            "hidden layer sizes of the MLPs (paper: 512, 256 for locomotion)",
+        ),
+        ParamSpec::new(
+            "embedding_dim",
+            ParamKind::Int,
+            Value::Int(100),
+            "token embedding width of the web encoder (paper: 100)",
+        ),
+        ParamSpec::new(
+            "latent_dim",
+            ParamKind::Int,
+            Value::Int(50),
+            "element/field latent width (web, paper: 50) and per-cell hidden width (circuit)",
+        ),
+    ]
+}
+
+pub(crate) fn net_options(p: &Params) -> Result<NetOptions, RunError> {
+    let hidden: Vec<usize> = match p.get("hidden_sizes") {
+        Some(Value::List(items)) => items
+            .iter()
+            .map(|v| v.as_i64().and_then(|i| usize::try_from(i).ok()).filter(|i| *i > 0))
+            .collect::<Option<Vec<_>>>()
+            .ok_or_else(|| invalid("hidden_sizes", "must be a list of positive integers"))?,
+        _ => return Err(invalid("hidden_sizes", "must be a list of positive integers")),
+    };
+    if hidden.is_empty() {
+        return Err(invalid("hidden_sizes", "needs at least one layer"));
+    }
+    Ok(NetOptions {
+        architecture: p.str("architecture").map_err(hp)?.to_string(),
+        hidden_sizes: hidden,
+        embedding_dim: positive_usize(p, "embedding_dim")?,
+        latent_dim: positive_usize(p, "latent_dim")?,
+    })
+}
+
+pub(crate) fn schedule_specs() -> Vec<ParamSpec> {
+    vec![
+        ParamSpec::new(
+            "lr_schedule",
+            ParamKind::Choice(&["constant", "cosine"]),
+            Value::Str("constant".into()),
+            "learning-rate schedule over the training budget (circuit PPO in the paper: cosine)",
+        ),
+        ParamSpec::new(
+            "lr_final_fraction",
+            ParamKind::Float,
+            Value::Float(0.1),
+            "final learning rate of the cosine schedule as a fraction of the initial (paper: alpha = 0.1)",
+        ),
+    ]
+}
+
+pub(crate) fn schedule(p: &Params, lr: f32) -> Result<LrSchedule, RunError> {
+    Ok(match p.str("lr_schedule").map_err(hp)? {
+        "cosine" => LrSchedule::Cosine {
+            initial: lr,
+            final_fraction: unit_f32(p, "lr_final_fraction")?,
+        },
+        _ => LrSchedule::Constant(lr),
+    })
+}
+
+/// Builds `settings.num_envs` training environments, stepped in parallel.
+pub(crate) fn make_vec_env(ctx: &TrainingContext<'_>) -> Result<(VecEnv, EnvSpec), RunError> {
+    let n = ctx.settings().num_envs.max(1);
+    let envs = (0..n)
+        .map(|i| ctx.make_env(i))
+        .collect::<Result<Vec<_>, _>>()?;
+    let spec = envs
+        .first()
+        .map(|e| e.spec().clone())
+        .ok_or_else(|| RunError::Unsupported("no environment".into()))?;
+    Ok((VecEnv::new(envs, ctx.seed()), spec))
+}
+
+/// The network of a policy for `spec`: discrete (auto-chosen encoder) or diagonal Gaussian.
+pub(crate) fn head_for(
+    spec: &EnvSpec,
+    layout: &ObsLayout,
+    opts: &NetOptions,
+    with_value: bool,
+) -> Result<Head, RunError> {
+    match &spec.action_space {
+        Space::Discrete { .. } => Ok(Head::Discrete(DiscreteNet::for_spec(
+            spec, layout, opts, with_value,
+        )?)),
+        Space::Box { low, .. } => Ok(Head::Gaussian(GaussianArch::new(
+            layout.total_dim(),
+            low.len(),
+            &opts.hidden_sizes,
+            with_value,
+        ))),
+        Space::Dict(_) => Err(RunError::Unsupported(
+            "dict action spaces are not supported".into(),
+        )),
+    }
+}
+
+pub(crate) fn check_finite(what: &str, v: &[f32]) -> Result<(), RunError> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(RunError::Diverged(format!("{what} became non-finite")))
+    }
+}

@@ -1,0 +1,802 @@
+//! Policy and value networks, chosen from an environment's observation and action spaces.
+//!
+//! | observation | network | paper's network |
+//! |---|---|---|
+//! | anything (fallback) | all tensors flattened → MLP (`hidden_sizes`, ReLU) for logits or mean, a separate MLP for the value | QL actor/value `fc_layer_params=(512, 256)` |
+//! | circuit (`features`, `grid` `[C, rows, cols]`, `Discrete(rows·cols)`) | MLP over `features` → global embedding *g*; per-cell hidden layer `relu(W_c·cell + W_g·g)` → one score per cell (a 1×1 convolution conditioned on *g*); value MLP on *g* (32-8-1) | GCN encoder over the netlist graph, deconvolution head 8×8×32 → 128×128, value head 32-8-1. We have no graph tensor in the contract, so the summary features stand in for the GCN embedding; the per-cell head replaces the deconvolution because our grid is the env's own (no 128×128 padding). |
+//! | web (`profile_*`, `dom_*`, `Discrete(E·F·2)`) | token embeddings (`embedding_dim`, paper 100) mean-pooled per attribute; element MLP over the 5 pooled attributes + 8 DOM features → `latent_dim` (paper 50); field MLP over pooled key + value → `latent_dim`; logit(e, f, k) = ⟨field_f, element_e⟩ + type_k(element_e) + type_k(field_f); value MLP on the mean element and mean field embeddings | sonnet `WebLSTMEncoder`: same embedding/latent sizes and the same dot-product + action-type logits; an LSTM runs over the DOM sequence. We drop the LSTM (elements are scored independently plus their 8 geometry/state features), which keeps inference allocation-free and fast. |
+
+use a2perf_core::{EnvSpec, PolicyError, RngStream, Space};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
+use serde::{Deserialize, Serialize};
+
+use crate::batch::{ObsBatch, ObsLayout};
+use crate::nn::embed::Embedding;
+use crate::nn::{Activation, Linear, Mlp, MlpWs, ParamAlloc, ensure};
+
+/// Network choices shared by every algorithm (hyperparameters).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NetOptions {
+    /// `auto` (pick from the spaces), `mlp` (always the flat fallback).
+    pub architecture: String,
+    /// Hidden layer sizes of MLPs.
+    pub hidden_sizes: Vec<usize>,
+    /// Token embedding width (web).
+    pub embedding_dim: usize,
+    /// Latent width of element and field encodings (web) and per-cell hidden width (circuit).
+    pub latent_dim: usize,
+}
+
+impl Default for NetOptions {
+    fn default() -> Self {
+        Self {
+            architecture: "auto".into(),
+            hidden_sizes: vec![64, 64],
+            embedding_dim: 100,
+            latent_dim: 50,
+        }
+    }
+}
+
+/// Circuit placement network (see the module table).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CircuitArch {
+    features: usize,
+    grid: usize,
+    channels: usize,
+    cells: usize,
+    global: Mlp,
+    global_to_cell: Linear,
+    cell_in: Linear,
+    score: Linear,
+    value: Option<Mlp>,
+}
+
+/// Web navigation DOM–profile network (see the module table).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WebArch {
+    /// Tensor indices: profile_keys, profile_values, profile_mask, dom_tokens, dom_features, dom_mask.
+    idx: [usize; 6],
+    fields: usize,
+    elements: usize,
+    tokens: usize,
+    attrs: usize,
+    dom_feats: usize,
+    embed: Embedding,
+    field_mlp: Mlp,
+    elem_mlp: Mlp,
+    type_e: Linear,
+    type_f: Linear,
+    value: Option<Mlp>,
+}
+
+/// Which network computes the logits.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum DiscreteArch {
+    /// Flattened observation → MLP.
+    Flat {
+        /// Logits MLP.
+        policy: Mlp,
+        /// Value MLP.
+        value: Option<Mlp>,
+    },
+    /// Circuit placement.
+    Circuit(CircuitArch),
+    /// Web navigation.
+    Web(WebArch),
+}
+
+#[derive(Clone, Debug, Default)]
+struct Ws {
+    x: Vec<f32>,
+    logits: Vec<f32>,
+    values: Vec<f32>,
+    a: MlpWs,
+    b: MlpWs,
+    c: MlpWs,
+    v: [Vec<f32>; 12],
+    active_f: Vec<(usize, usize)>,
+    active_e: Vec<(usize, usize)>,
+    batch: usize,
+}
+
+/// A network mapping observation batches to logits `[B, n]` (or Q-values) and, optionally, state
+/// values `[B]`. Owns its activation workspace; parameters are passed in.
+#[derive(Clone, Debug)]
+pub struct DiscreteNet {
+    /// The architecture (serialised into checkpoints).
+    pub arch: DiscreteArch,
+    n: usize,
+    num_params: usize,
+    ws: Ws,
+}
+
+fn flat_mlps(
+    alloc: &mut ParamAlloc,
+    input: usize,
+    hidden: &[usize],
+    out: usize,
+    with_value: bool,
+) -> (Mlp, Option<Mlp>) {
+    let sizes = |o: usize| {
+        let mut s = vec![input];
+        s.extend_from_slice(hidden);
+        s.push(o);
+        s
+    };
+    let policy = Mlp::new(alloc, &sizes(out), Activation::Relu);
+    let value = with_value.then(|| Mlp::new(alloc, &sizes(1), Activation::Relu));
+    (policy, value)
+}
+
+impl DiscreteNet {
+    /// Builds the network for `spec` (which must have a discrete action space).
+    pub fn for_spec(
+        spec: &EnvSpec,
+        layout: &ObsLayout,
+        opts: &NetOptions,
+        with_value: bool,
+    ) -> Result<Self, PolicyError> {
+        let n = match spec.action_space {
+            Space::Discrete { n } => n,
+            _ => {
+                return Err(PolicyError::BadObservation(
+                    "a discrete network needs a discrete action space".into(),
+                ));
+            }
+        };
+        let mut alloc = ParamAlloc::new();
+        let auto = opts.architecture == "auto";
+        let arch = if let (true, Some(a)) = (auto, web_arch(spec, layout, opts, n, with_value, &mut alloc)) {
+            a
+        } else if let (true, Some(a)) = (auto, circuit_arch(layout, opts, n, with_value, &mut alloc)) {
+            a
+        } else {
+            alloc = ParamAlloc::new();
+            let (policy, value) =
+                flat_mlps(&mut alloc, layout.total_dim(), &opts.hidden_sizes, n, with_value);
+            DiscreteArch::Flat { policy, value }
+        };
+        Ok(Self::from_arch(arch, n, alloc.len()))
+    }
+
+    /// Rebuilds a network from its serialised architecture.
+    pub fn from_arch(arch: DiscreteArch, n: usize, num_params: usize) -> Self {
+        Self {
+            arch,
+            n,
+            num_params,
+            ws: Ws::default(),
+        }
+    }
+
+    /// Number of actions.
+    pub fn num_actions(&self) -> usize {
+        self.n
+    }
+
+    /// Number of parameters.
+    pub fn num_params(&self) -> usize {
+        self.num_params
+    }
+
+    /// Short name of the architecture (`mlp`, `circuit`, `web`).
+    pub fn kind(&self) -> &'static str {
+        match self.arch {
+            DiscreteArch::Flat { .. } => "mlp",
+            DiscreteArch::Circuit(_) => "circuit",
+            DiscreteArch::Web(_) => "web",
+        }
+    }
+
+    /// Whether the network has a value head.
+    pub fn has_value(&self) -> bool {
+        match &self.arch {
+            DiscreteArch::Flat { value, .. } => value.is_some(),
+            DiscreteArch::Circuit(c) => c.value.is_some(),
+            DiscreteArch::Web(w) => w.value.is_some(),
+        }
+    }
+
+    /// Fresh parameters (policy-output layers are scaled down so the initial policy is near
+    /// uniform, as in standard PPO implementations).
+    pub fn init_params(&self, rng: &mut RngStream) -> Vec<f32> {
+        let mut p = vec![0.0; self.num_params];
+        match &self.arch {
+            DiscreteArch::Flat { policy, value } => {
+                policy.init(&mut p, rng, 0.01);
+                if let Some(v) = value {
+                    v.init(&mut p, rng, 1.0);
+                }
+            }
+            DiscreteArch::Circuit(c) => {
+                c.global.init(&mut p, rng, std::f32::consts::SQRT_2);
+                c.global_to_cell.init(&mut p, rng, 1.0);
+                c.cell_in.init(&mut p, rng, 1.0);
+                c.score.init(&mut p, rng, 0.01);
+                if let Some(v) = &c.value {
+                    v.init(&mut p, rng, 1.0);
+                }
+            }
+            DiscreteArch::Web(w) => {
+                w.embed.init(&mut p, rng);
+                w.field_mlp.init(&mut p, rng, 1.0);
+                w.elem_mlp.init(&mut p, rng, 1.0);
+                w.type_e.init(&mut p, rng, 0.01);
+                w.type_f.init(&mut p, rng, 0.01);
+                if let Some(v) = &w.value {
+                    v.init(&mut p, rng, 1.0);
+                }
+            }
+        }
+        p
+    }
+
+    /// Logits of the last forward pass, `[B, n]` (unmasked).
+    pub fn logits(&self) -> &[f32] {
+        &self.ws.logits[..self.ws.batch * self.n]
+    }
+
+    /// Values of the last forward pass, `[B]` (zeros without a value head).
+    pub fn values(&self) -> &[f32] {
+        &self.ws.values[..self.ws.batch]
+    }
+
+    /// Forward pass over every row of `batch`.
+    pub fn forward(&mut self, params: &[f32], batch: &ObsBatch) {
+        let b = batch.len();
+        let n = self.n;
+        let ws = &mut self.ws;
+        ws.batch = b;
+        ensure(&mut ws.logits, b * n);
+        ensure(&mut ws.values, b);
+        ws.values[..b].fill(0.0);
+        match &self.arch {
+            DiscreteArch::Flat { policy, value } => {
+                batch.concat_into(&mut ws.x);
+                let y = policy.forward(params, &ws.x, b, &mut ws.a);
+                ws.logits[..b * n].copy_from_slice(y);
+                if let Some(v) = value {
+                    let y = v.forward(params, &ws.x, b, &mut ws.b);
+                    ws.values[..b].copy_from_slice(y);
+                }
+            }
+            DiscreteArch::Circuit(c) => circuit_forward(c, params, batch, ws),
+            DiscreteArch::Web(w) => web_forward(w, params, batch, ws),
+        }
+    }
+
+    /// Backward pass for the last forward: accumulates parameter gradients of
+    /// `Σ dlogits·logits + Σ dvalues·values` into `grads`.
+    pub fn backward(
+        &mut self,
+        params: &[f32],
+        grads: &mut [f32],
+        batch: &ObsBatch,
+        dlogits: &[f32],
+        dvalues: Option<&[f32]>,
+    ) {
+        let b = self.ws.batch;
+        let ws = &mut self.ws;
+        match &self.arch {
+            DiscreteArch::Flat { policy, value } => {
+                policy.backward(params, grads, &ws.x, dlogits, &mut ws.a, None);
+                if let (Some(v), Some(dv)) = (value, dvalues) {
+                    v.backward(params, grads, &ws.x, &dv[..b], &mut ws.b, None);
+                }
+            }
+            DiscreteArch::Circuit(c) => circuit_backward(c, params, grads, batch, ws, dlogits, dvalues),
+            DiscreteArch::Web(w) => web_backward(w, params, grads, batch, ws, dlogits, dvalues),
+        }
+    }
+}
+
+fn circuit_arch(
+    layout: &ObsLayout,
+    opts: &NetOptions,
+    n: usize,
+    with_value: bool,
+    alloc: &mut ParamAlloc,
+) -> Option<DiscreteArch> {
+    let features = layout.index("features")?;
+    let grid = layout.index("grid")?;
+    let shape = &layout.tensors[grid].1;
+    if shape.len() != 3 || shape[1] * shape[2] != n || n == 0 {
+        return None;
+    }
+    let channels = shape[0];
+    let d = layout.dim(features);
+    let mut sizes = vec![d];
+    sizes.extend_from_slice(&opts.hidden_sizes);
+    let h = *sizes.last()?;
+    let k = opts.latent_dim;
+    let global = Mlp::encoder(alloc, &sizes, Activation::Relu);
+    let global_to_cell = Linear::new(alloc, h, k);
+    let cell_in = Linear::new(alloc, channels, k);
+    let score = Linear::new(alloc, k, 1);
+    let value = with_value.then(|| Mlp::new(alloc, &[h, 32, 8, 1], Activation::Relu));
+    Some(DiscreteArch::Circuit(CircuitArch {
+        features,
+        grid,
+        channels,
+        cells: n,
+        global,
+        global_to_cell,
+        cell_in,
+        score,
+        value,
+    }))
+}
+
+fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws) {
+    let b = batch.len();
+    let (nc, ch, k) = (c.cells, c.channels, c.cell_in.out);
+    let g = c.global.forward(params, batch.tensor(c.features), b, &mut ws.a);
+    let [gc, cx, h, ..] = &mut ws.v;
+    ensure(gc, b * k);
+    c.global_to_cell.forward(params, g, b, gc);
+    ensure(cx, b * nc * ch);
+    let grid = batch.tensor(c.grid);
+    for r in 0..b {
+        let src = &grid[r * ch * nc..(r + 1) * ch * nc];
+        let dst = &mut cx[r * nc * ch..(r + 1) * nc * ch];
+        for chn in 0..ch {
+            for i in 0..nc {
+                dst[i * ch + chn] = src[chn * nc + i];
+            }
+        }
+    }
+    ensure(h, b * nc * k);
+    c.cell_in.forward(params, cx, b * nc, h);
+    for r in 0..b {
+        let gr = &gc[r * k..(r + 1) * k];
+        for row in h[r * nc * k..(r + 1) * nc * k].chunks_exact_mut(k) {
+            for (x, g) in row.iter_mut().zip(gr) {
+                *x = (*x + g).max(0.0);
+            }
+        }
+    }
+    c.score.forward(params, h, b * nc, &mut ws.logits);
+    if let Some(v) = &c.value {
+        let y = v.forward(params, c.global.output(&ws.a), b, &mut ws.c);
+        ws.values[..b].copy_from_slice(y);
+    }
+}
+
+fn circuit_backward(
+    c: &CircuitArch,
+    params: &[f32],
+    grads: &mut [f32],
+    batch: &ObsBatch,
+    ws: &mut Ws,
+    dlogits: &[f32],
+    dvalues: Option<&[f32]>,
+) {
+    let b = ws.batch;
+    let (nc, k) = (c.cells, c.cell_in.out);
+    let h_dim = c.global.out();
+    let [_gc, cx, h, dh, dgc, dg, dg2, ..] = &mut ws.v;
+    ensure(dh, b * nc * k);
+    c.score.backward(params, grads, h, dlogits, b * nc, Some(dh));
+    ensure(dgc, b * k);
+    dgc[..b * k].fill(0.0);
+    for r in 0..b {
+        let dgr = &mut dgc[r * k..(r + 1) * k];
+        let hr = &h[r * nc * k..(r + 1) * nc * k];
+        for (drow, hrow) in dh[r * nc * k..(r + 1) * nc * k]
+            .chunks_exact_mut(k)
+            .zip(hr.chunks_exact(k))
+        {
+            for ((d, y), g) in drow.iter_mut().zip(hrow).zip(dgr.iter_mut()) {
+                if *y <= 0.0 {
+                    *d = 0.0;
+                }
+                *g += *d;
+            }
+        }
+    }
+    c.cell_in.backward(params, grads, cx, dh, b * nc, None);
+    ensure(dg, b * h_dim);
+    let g = c.global.output(&ws.a);
+    c.global_to_cell.backward(params, grads, g, dgc, b, Some(dg));
+    if let (Some(v), Some(dv)) = (&c.value, dvalues) {
+        ensure(dg2, b * h_dim);
+        v.backward(params, grads, g, &dv[..b], &mut ws.c, Some(dg2));
+        for (a, x) in dg[..b * h_dim].iter_mut().zip(&dg2[..b * h_dim]) {
+            *a += x;
+        }
+    }
+    c.global
+        .backward(params, grads, batch.tensor(c.features), dg, &mut ws.a, None);
+}
+
+fn web_arch(
+    spec: &EnvSpec,
+    layout: &ObsLayout,
+    opts: &NetOptions,
+    n: usize,
+    with_value: bool,
+    alloc: &mut ParamAlloc,
+) -> Option<DiscreteArch> {
+    let names = [
+        "profile_keys",
+        "profile_values",
+        "profile_mask",
+        "dom_tokens",
+        "dom_features",
+        "dom_mask",
+    ];
+    let mut idx = [0; 6];
+    for (i, name) in names.iter().enumerate() {
+        idx[i] = layout.index(name)?;
+    }
+    let shape = |i: usize| &layout.tensors[idx[i]].1;
+    let (pk, dt, df) = (shape(0), shape(3), shape(4));
+    if pk.len() != 2 || dt.len() != 3 || df.len() != 2 {
+        return None;
+    }
+    let (fields, tokens) = (pk[0], pk[1]);
+    let (elements, attrs) = (dt[0], dt[1]);
+    if dt[2] != tokens
+        || shape(1) != pk
+        || layout.dim(idx[2]) != fields
+        || layout.dim(idx[5]) != elements
+        || df[0] != elements
+        || n != elements * fields * 2
+    {
+        return None;
+    }
+    let vocab = spec
+        .metadata
+        .get("vocab_size")
+        .and_then(|v| v.parse::<usize>().ok())
+        .unwrap_or(500);
+    let (d, l) = (opts.embedding_dim, opts.latent_dim);
+    let embed = Embedding::new(alloc, vocab, d);
+    let field_mlp = Mlp::new(alloc, &[2 * d, l, l], Activation::Relu);
+    let elem_mlp = Mlp::new(alloc, &[attrs * d + df[1], l, l], Activation::Relu);
+    let type_e = Linear::new(alloc, l, 2);
+    let type_f = Linear::new(alloc, l, 2);
+    let value = with_value.then(|| Mlp::new(alloc, &[2 * l, l, 1], Activation::Relu));
+    Some(DiscreteArch::Web(WebArch {
+        idx,
+        fields,
+        elements,
+        tokens,
+        attrs,
+        dom_feats: df[1],
+        embed,
+        field_mlp,
+        elem_mlp,
+        type_e,
+        type_f,
+        value,
+    }))
+}
+
+fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws) {
+    let b = batch.len();
+    let (nf, ne, t, na) = (w.fields, w.elements, w.tokens, w.attrs);
+    let (d, l) = (w.embed.dim, w.field_mlp.out());
+    let pk = batch.tensor(w.idx[0]);
+    let pv = batch.tensor(w.idx[1]);
+    let pm = batch.tensor(w.idx[2]);
+    let dt = batch.tensor(w.idx[3]);
+    let df = batch.tensor(w.idx[4]);
+    let dm = batch.tensor(w.idx[5]);
+    ws.active_f.clear();
+    ws.active_e.clear();
+    for r in 0..b {
+        for f in 0..nf {
+            if pm[r * nf + f] > 0.5 {
+                ws.active_f.push((r, f));
+            }
+        }
+        for e in 0..ne {
+            if dm[r * ne + e] > 0.5 {
+                ws.active_e.push((r, e));
+            }
+        }
+    }
+    let (caf, cae) = (ws.active_f.len(), ws.active_e.len());
+    let [fin, ein, fd, ed, tf, te, s, vin, ..] = &mut ws.v;
+    // Field and element inputs, active rows only.
+    ensure(fin, caf * 2 * d);
+    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
+        let at = (r * nf + f) * t;
+        let o = &mut fin[i * 2 * d..(i + 1) * 2 * d];
+        w.embed.pool(params, &pk[at..at + t], t, &mut o[..d]);
+        w.embed.pool(params, &pv[at..at + t], t, &mut o[d..]);
+    }
+    let ein_w = na * d + w.dom_feats;
+    ensure(ein, cae * ein_w);
+    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
+        let at = (r * ne + e) * na * t;
+        let o = &mut ein[i * ein_w..(i + 1) * ein_w];
+        w.embed.pool(params, &dt[at..at + na * t], t, &mut o[..na * d]);
+        let fa = (r * ne + e) * w.dom_feats;
+        o[na * d..].copy_from_slice(&df[fa..fa + w.dom_feats]);
+    }
+    let fe = w.field_mlp.forward(params, fin, caf, &mut ws.a);
+    let ee = w.elem_mlp.forward(params, ein, cae, &mut ws.b);
+    // Dense [B, F, L] and [B, E, L] with zeros for inactive rows.
+    ensure(fd, b * nf * l);
+    fd[..b * nf * l].fill(0.0);
+    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
+        fd[(r * nf + f) * l..(r * nf + f + 1) * l].copy_from_slice(&fe[i * l..(i + 1) * l]);
+    }
+    ensure(ed, b * ne * l);
+    ed[..b * ne * l].fill(0.0);
+    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
+        ed[(r * ne + e) * l..(r * ne + e + 1) * l].copy_from_slice(&ee[i * l..(i + 1) * l]);
+    }
+    // Action-type terms.
+    ensure(tf, b * nf * 2);
+    tf[..b * nf * 2].fill(0.0);
+    ensure(te, b * ne * 2);
+    te[..b * ne * 2].fill(0.0);
+    ensure(vin, caf.max(cae) * 2);
+    w.type_f.forward(params, fe, caf, vin);
+    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
+        tf[(r * nf + f) * 2..(r * nf + f) * 2 + 2].copy_from_slice(&vin[i * 2..i * 2 + 2]);
+    }
+    w.type_e.forward(params, ee, cae, vin);
+    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
+        te[(r * ne + e) * 2..(r * ne + e) * 2 + 2].copy_from_slice(&vin[i * 2..i * 2 + 2]);
+    }
+    // Scores S[b] = F_b E_bᵀ, [F, E].
+    ensure(s, nf * ne);
+    for r in 0..b {
+        let fm = MatRef::from_row_major_slice(&fd[r * nf * l..(r + 1) * nf * l], nf, l);
+        let em = MatRef::from_row_major_slice(&ed[r * ne * l..(r + 1) * ne * l], ne, l);
+        let sm = MatMut::from_row_major_slice_mut(&mut s[..nf * ne], nf, ne);
+        matmul(sm, Accum::Replace, fm, em.transpose(), 1.0f32, Par::Seq);
+        let logits = &mut ws.logits[r * ne * nf * 2..(r + 1) * ne * nf * 2];
+        for e in 0..ne {
+            let tei = &te[(r * ne + e) * 2..(r * ne + e) * 2 + 2];
+            for f in 0..nf {
+                let tfi = &tf[(r * nf + f) * 2..(r * nf + f) * 2 + 2];
+                let sc = s[f * ne + e];
+                let at = (e * nf + f) * 2;
+                logits[at] = sc + tei[0] + tfi[0];
+                logits[at + 1] = sc + tei[1] + tfi[1];
+            }
+        }
+    }
+    if let Some(v) = &w.value {
+        web_value_input(w, ws, b);
+        let [.., vx, _, _] = &mut ws.v;
+        let y = v.forward(params, vx, b, &mut ws.c);
+        ws.values[..b].copy_from_slice(y);
+    }
+}
+
+/// Mean element and mean field embeddings per row → `ws.v[9]` `[B, 2L]`.
+fn web_value_input(w: &WebArch, ws: &mut Ws, b: usize) {
+    let l = w.field_mlp.out();
+    let (nf, ne) = (w.fields, w.elements);
+    let [_, _, fd, ed, .., vx, cnt, _] = &mut ws.v;
+    ensure(vx, b * 2 * l);
+    ensure(cnt, b * 2);
+    vx[..b * 2 * l].fill(0.0);
+    cnt[..b * 2].fill(0.0);
+    for &(r, e) in &ws.active_e {
+        cnt[r * 2] += 1.0;
+        for (o, x) in vx[r * 2 * l..r * 2 * l + l]
+            .iter_mut()
+            .zip(&ed[(r * ne + e) * l..(r * ne + e + 1) * l])
+        {
+            *o += x;
+        }
+    }
+    for &(r, f) in &ws.active_f {
+        cnt[r * 2 + 1] += 1.0;
+        for (o, x) in vx[r * 2 * l + l..(r + 1) * 2 * l]
+            .iter_mut()
+            .zip(&fd[(r * nf + f) * l..(r * nf + f + 1) * l])
+        {
+            *o += x;
+        }
+    }
+    for r in 0..b {
+        let (ce, cf) = (cnt[r * 2].max(1.0), cnt[r * 2 + 1].max(1.0));
+        vx[r * 2 * l..r * 2 * l + l].iter_mut().for_each(|x| *x /= ce);
+        vx[r * 2 * l + l..(r + 1) * 2 * l]
+            .iter_mut()
+            .for_each(|x| *x /= cf);
+    }
+}
+
+fn web_backward(
+    w: &WebArch,
+    params: &[f32],
+    grads: &mut [f32],
+    batch: &ObsBatch,
+    ws: &mut Ws,
+    dlogits: &[f32],
+    dvalues: Option<&[f32]>,
+) {
+    let b = ws.batch;
+    let (nf, ne, t, na) = (w.fields, w.elements, w.tokens, w.attrs);
+    let (d, l) = (w.embed.dim, w.field_mlp.out());
+    let (caf, cae) = (ws.active_f.len(), ws.active_e.len());
+    let ein_w = na * d + w.dom_feats;
+    // Work buffers: reuse x for dS, and MlpWs-independent scratch below.
+    let mut dfd = std::mem::take(&mut ws.x);
+    let [fin, ein, fd, ed, dtf, dte, ds, dfe, dee, vx, cnt, dtmp] = &mut ws.v;
+    ensure(ds, nf * ne);
+    ensure(&mut dfd, b * (nf + ne) * l);
+    ensure(dtf, b * nf * 2);
+    ensure(dte, b * ne * 2);
+    dtf[..b * nf * 2].fill(0.0);
+    dte[..b * ne * 2].fill(0.0);
+    let (dfd_f, dfd_e) = dfd[..b * (nf + ne) * l].split_at_mut(b * nf * l);
+    for r in 0..b {
+        let dl = &dlogits[r * ne * nf * 2..(r + 1) * ne * nf * 2];
+        for e in 0..ne {
+            for f in 0..nf {
+                let at = (e * nf + f) * 2;
+                let (g0, g1) = (dl[at], dl[at + 1]);
+                ds[f * ne + e] = g0 + g1;
+                dte[(r * ne + e) * 2] += g0;
+                dte[(r * ne + e) * 2 + 1] += g1;
+                dtf[(r * nf + f) * 2] += g0;
+                dtf[(r * nf + f) * 2 + 1] += g1;
+            }
+        }
+        let dsm = MatRef::from_row_major_slice(&ds[..nf * ne], nf, ne);
+        let fm = MatRef::from_row_major_slice(&fd[r * nf * l..(r + 1) * nf * l], nf, l);
+        let em = MatRef::from_row_major_slice(&ed[r * ne * l..(r + 1) * ne * l], ne, l);
+        let dfm = MatMut::from_row_major_slice_mut(&mut dfd_f[r * nf * l..(r + 1) * nf * l], nf, l);
+        matmul(dfm, Accum::Replace, dsm, em, 1.0f32, Par::Seq);
+        let dem = MatMut::from_row_major_slice_mut(&mut dfd_e[r * ne * l..(r + 1) * ne * l], ne, l);
+        matmul(dem, Accum::Replace, dsm.transpose(), fm, 1.0f32, Par::Seq);
+    }
+    // Value head contributions to the dense gradients.
+    if let (Some(v), Some(dv)) = (&w.value, dvalues) {
+        ensure(dtmp, b * 2 * l);
+        v.backward(params, grads, vx, &dv[..b], &mut ws.c, Some(dtmp));
+        for &(r, e) in &ws.active_e {
+            let c = cnt[r * 2].max(1.0);
+            for (o, x) in dfd_e[(r * ne + e) * l..(r * ne + e + 1) * l]
+                .iter_mut()
+                .zip(&dtmp[r * 2 * l..r * 2 * l + l])
+            {
+                *o += x / c;
+            }
+        }
+        for &(r, f) in &ws.active_f {
+            let c = cnt[r * 2 + 1].max(1.0);
+            for (o, x) in dfd_f[(r * nf + f) * l..(r * nf + f + 1) * l]
+                .iter_mut()
+                .zip(&dtmp[r * 2 * l + l..(r + 1) * 2 * l])
+            {
+                *o += x / c;
+            }
+        }
+    }
+    // Gather to active rows, add type-head gradients.
+    ensure(dfe, caf * l);
+    ensure(dee, cae.max(caf) * 2);
+    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
+        dfe[i * l..(i + 1) * l].copy_from_slice(&dfd_f[(r * nf + f) * l..(r * nf + f + 1) * l]);
+        dee[i * 2..i * 2 + 2].copy_from_slice(&dtf[(r * nf + f) * 2..(r * nf + f) * 2 + 2]);
+    }
+    ensure(dtmp, caf.max(cae) * l.max(2 * l));
+    let fe = w.field_mlp.output(&ws.a);
+    w.type_f.backward(params, grads, fe, dee, caf, Some(dtmp));
+    for (a, x) in dfe[..caf * l].iter_mut().zip(&dtmp[..caf * l]) {
+        *a += x;
+    }
+    // Field MLP and embeddings.
+    ensure(fd, caf * 2 * d);
+    w.field_mlp
+        .backward(params, grads, fin, dfe, &mut ws.a, Some(&mut fd[..caf * 2 * d]));
+    let pk = batch.tensor(w.idx[0]);
+    let pv = batch.tensor(w.idx[1]);
+    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
+        let at = (r * nf + f) * t;
+        let g = &fd[i * 2 * d..(i + 1) * 2 * d];
+        w.embed.pool_backward(grads, &pk[at..at + t], t, &g[..d]);
+        w.embed.pool_backward(grads, &pv[at..at + t], t, &g[d..]);
+    }
+    // Elements: reuse dfe as the [cae, L] gradient buffer.
+    ensure(dfe, cae * l);
+    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
+        dfe[i * l..(i + 1) * l].copy_from_slice(&dfd_e[(r * ne + e) * l..(r * ne + e + 1) * l]);
+        dee[i * 2..i * 2 + 2].copy_from_slice(&dte[(r * ne + e) * 2..(r * ne + e) * 2 + 2]);
+    }
+    let ee = w.elem_mlp.output(&ws.b);
+    w.type_e.backward(params, grads, ee, dee, cae, Some(dtmp));
+    for (a, x) in dfe[..cae * l].iter_mut().zip(&dtmp[..cae * l]) {
+        *a += x;
+    }
+    ensure(ed, cae * ein_w);
+    w.elem_mlp
+        .backward(params, grads, ein, dfe, &mut ws.b, Some(&mut ed[..cae * ein_w]));
+    let dt = batch.tensor(w.idx[3]);
+    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
+        let at = (r * ne + e) * na * t;
+        w.embed
+            .pool_backward(grads, &dt[at..at + na * t], t, &ed[i * ein_w..i * ein_w + na * d]);
+    }
+    ws.x = dfd;
+}
+
+/// Continuous-action network: Gaussian policy with a state-independent log-std (PPO, BC), plus an
+/// optional separate value MLP.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GaussianArch {
+    /// Mean MLP.
+    pub actor: Mlp,
+    /// Value MLP.
+    pub critic: Option<Mlp>,
+    /// Offset of the `log_std` vector.
+    pub log_std: usize,
+    /// Action dimensions.
+    pub act_dim: usize,
+    /// Number of parameters.
+    pub num_params: usize,
+}
+
+impl GaussianArch {
+    /// Actor (and critic) MLPs over the flattened observation.
+    pub fn new(obs_dim: usize, act_dim: usize, hidden: &[usize], with_value: bool) -> Self {
+        let mut alloc = ParamAlloc::new();
+        let sizes = |o: usize| {
+            let mut s = vec![obs_dim];
+            s.extend_from_slice(hidden);
+            s.push(o);
+            s
+        };
+        let actor = Mlp::new(&mut alloc, &sizes(act_dim), Activation::Tanh);
+        let critic = with_value.then(|| Mlp::new(&mut alloc, &sizes(1), Activation::Tanh));
+        let log_std = alloc.take(act_dim);
+        Self {
+            actor,
+            critic,
+            log_std,
+            act_dim,
+            num_params: alloc.len(),
+        }
+    }
+
+    /// Fresh parameters with every `log_std` at `init_log_std`.
+    pub fn init_params(&self, rng: &mut RngStream, init_log_std: f32) -> Vec<f32> {
+        let mut p = vec![0.0; self.num_params];
+        self.actor.init(&mut p, rng, 0.01);
+        if let Some(c) = &self.critic {
+            c.init(&mut p, rng, 1.0);
+        }
+        p[self.log_std..self.log_std + self.act_dim].fill(init_log_std);
+        p
+    }
+}
+
+/// SAC actor: an MLP emitting the mean and the raw log-std of a tanh-squashed Gaussian.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SquashedArch {
+    /// MLP `obs → [mean | raw log-std]`.
+    pub actor: Mlp,
+    /// Action dimensions.
+    pub act_dim: usize,
+    /// Number of parameters.
+    pub num_params: usize,
+}
+
+impl SquashedArch {
+    /// Actor MLP over the flattened observation (ReLU, as the paper's SAC networks).
+    pub fn new(obs_dim: usize, act_dim: usize, hidden: &[usize]) -> Self {
+        let mut alloc = ParamAlloc::new();
+        let mut sizes = vec![obs_dim];
+        sizes.extend_from_slice(hidden);
+        sizes.push(2 * act_dim);
+        let actor = Mlp::new(&mut alloc, &sizes, Activation::Relu);
+        Self {
+            actor,
+            act_dim,
+            num_params: alloc.len(),
+        }
+    }
+}

@@ -1,0 +1,363 @@
+//! Small neural networks on faer: layers, MLPs, embeddings, distributions and the optimiser.
+//!
+//! Every network is a *structure* (layer sizes and offsets into a flat parameter vector) plus
+//! explicit *workspaces* holding activations. Parameters and gradients are plain `Vec<f32>`s,
+//! which makes the optimiser, gradient clipping, Polyak averaging and checkpoints one loop each,
+//! and lets one structure run with several parameter vectors (online and target networks).
+//!
+//! Activations are row-major `[batch, features]`. Workspaces grow to the largest batch seen and
+//! are reused afterwards, so forward and backward passes allocate nothing in the steady state.
+
+pub mod dist;
+pub mod embed;
+pub mod norm;
+pub mod optim;
+
+use a2perf_core::RngStream;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
+use serde::{Deserialize, Serialize};
+
+/// Grows `buf` to at least `len` elements (never shrinks, so steady state allocates nothing).
+pub(crate) fn ensure(buf: &mut Vec<f32>, len: usize) {
+    if buf.len() < len {
+        buf.resize(len, 0.0);
+    }
+}
+
+/// Hands out consecutive ranges of a flat parameter vector.
+#[derive(Clone, Debug, Default)]
+pub struct ParamAlloc {
+    next: usize,
+}
+
+impl ParamAlloc {
+    /// An empty allocator.
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Reserves `n` parameters and returns their offset.
+    pub fn take(&mut self, n: usize) -> usize {
+        let at = self.next;
+        self.next += n;
+        at
+    }
+    /// Total parameters reserved so far.
+    pub fn len(&self) -> usize {
+        self.next
+    }
+    /// Whether nothing was reserved.
+    pub fn is_empty(&self) -> bool {
+        self.next == 0
+    }
+}
+
+/// A fully connected layer `y = x Wᵀ + b`, with `W` stored row-major `[out, in]` followed by `b`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Linear {
+    /// Input features.
+    pub inp: usize,
+    /// Output features.
+    pub out: usize,
+    /// Offset of `W` in the parameter vector (`b` follows it).
+    pub offset: usize,
+}
+
+impl Linear {
+    /// A layer whose parameters are reserved from `alloc`.
+    pub fn new(alloc: &mut ParamAlloc, inp: usize, out: usize) -> Self {
+        let offset = alloc.take(inp * out + out);
+        Self { inp, out, offset }
+    }
+
+    fn w_range(&self) -> std::ops::Range<usize> {
+        self.offset..self.offset + self.inp * self.out
+    }
+
+    fn b_range(&self) -> std::ops::Range<usize> {
+        let s = self.offset + self.inp * self.out;
+        s..s + self.out
+    }
+
+    /// Uniform `±gain·√(3/in)` weights (variance `gain²/in`, LeCun-style) and zero biases.
+    pub fn init(&self, params: &mut [f32], rng: &mut RngStream, gain: f32) {
+        let k = gain * (3.0 / self.inp.max(1) as f32).sqrt();
+        for w in &mut params[self.w_range()] {
+            *w = (rng.uniform_f32() * 2.0 - 1.0) * k;
+        }
+        params[self.b_range()].fill(0.0);
+    }
+
+    /// `y[b, out] = x[b, in] Wᵀ + bias` for the first `batch` rows.
+    pub fn forward(&self, params: &[f32], x: &[f32], batch: usize, y: &mut [f32]) {
+        let bias = &params[self.b_range()];
+        let y = &mut y[..batch * self.out];
+        for row in y.chunks_exact_mut(self.out) {
+            row.copy_from_slice(bias);
+        }
+        if batch == 0 {
+            return;
+        }
+        let xm = MatRef::from_row_major_slice(&x[..batch * self.inp], batch, self.inp);
+        let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
+        let ym = MatMut::from_row_major_slice_mut(y, batch, self.out);
+        matmul(ym, Accum::Add, xm, wm.transpose(), 1.0f32, Par::Seq);
+    }
+
+    /// Accumulates `dW += dyᵀ x`, `db += Σ dy` into `grads`, and writes `dx = dy W` when asked.
+    pub fn backward(
+        &self,
+        params: &[f32],
+        grads: &mut [f32],
+        x: &[f32],
+        dy: &[f32],
+        batch: usize,
+        dx: Option<&mut [f32]>,
+    ) {
+        if batch == 0 {
+            return;
+        }
+        let dy = &dy[..batch * self.out];
+        let dym = MatRef::from_row_major_slice(dy, batch, self.out);
+        let xm = MatRef::from_row_major_slice(&x[..batch * self.inp], batch, self.inp);
+        {
+            let gw = MatMut::from_row_major_slice_mut(
+                &mut grads[self.w_range()],
+                self.out,
+                self.inp,
+            );
+            matmul(gw, Accum::Add, dym.transpose(), xm, 1.0f32, Par::Seq);
+        }
+        let gb = &mut grads[self.b_range()];
+        for row in dy.chunks_exact(self.out) {
+            for (g, d) in gb.iter_mut().zip(row) {
+                *g += d;
+            }
+        }
+        if let Some(dx) = dx {
+            let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
+            let dxm = MatMut::from_row_major_slice_mut(&mut dx[..batch * self.inp], batch, self.inp);
+            matmul(dxm, Accum::Replace, dym, wm, 1.0f32, Par::Seq);
+        }
+    }
+}
+
+/// Hidden-layer nonlinearity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Activation {
+    /// `max(0, x)`.
+    Relu,
+    /// `tanh(x)`.
+    Tanh,
+}
+
+impl Activation {
+    /// Applies the nonlinearity in place.
+    pub fn apply(self, v: &mut [f32]) {
+        match self {
+            Activation::Relu => v.iter_mut().for_each(|x| *x = x.max(0.0)),
+            Activation::Tanh => v.iter_mut().for_each(|x| *x = x.tanh()),
+        }
+    }
+
+    /// Multiplies `d` by the derivative, expressed through the activation's *output* `y`.
+    pub fn backward(self, y: &[f32], d: &mut [f32]) {
+        match self {
+            Activation::Relu => {
+                for (d, y) in d.iter_mut().zip(y) {
+                    if *y <= 0.0 {
+                        *d = 0.0;
+                    }
+                }
+            }
+            Activation::Tanh => {
+                for (d, y) in d.iter_mut().zip(y) {
+                    *d *= 1.0 - y * y;
+                }
+            }
+        }
+    }
+}
+
+/// A multi-layer perceptron: linear layers with a nonlinearity between them (none after the last).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Mlp {
+    /// The layers, input first.
+    pub layers: Vec<Linear>,
+    /// Nonlinearity after every layer but the last.
+    pub activation: Activation,
+    /// Also apply the nonlinearity after the last layer (for encoders feeding other layers).
+    #[serde(default)]
+    pub activate_last: bool,
+}
+
+/// Activations of one [`Mlp`] pass (reused between calls).
+#[derive(Clone, Debug, Default)]
+pub struct MlpWs {
+    outs: Vec<Vec<f32>>,
+    d_a: Vec<f32>,
+    d_b: Vec<f32>,
+    batch: usize,
+}
+
+impl Mlp {
+    /// An MLP `sizes[0] → sizes[1] → … → sizes[last]`.
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::{Activation, Mlp, MlpWs, ParamAlloc};
+    /// use a2perf_core::RngStream;
+    /// let mut alloc = ParamAlloc::new();
+    /// let mlp = Mlp::new(&mut alloc, &[3, 8, 2], Activation::Relu);
+    /// let mut params = vec![0.0; alloc.len()];
+    /// mlp.init(&mut params, &mut RngStream::new(0, "init"), 1.0);
+    /// let mut ws = MlpWs::default();
+    /// let y = mlp.forward(&params, &[0.1, 0.2, 0.3, 1.0, 0.0, -1.0], 2, &mut ws);
+    /// assert_eq!(y.len(), 4);
+    /// ```
+    pub fn new(alloc: &mut ParamAlloc, sizes: &[usize], activation: Activation) -> Self {
+        let layers = sizes
+            .windows(2)
+            .map(|w| Linear::new(alloc, w[0], w[1]))
+            .collect();
+        Self {
+            layers,
+            activation,
+            activate_last: false,
+        }
+    }
+
+    /// Like [`new`](Self::new) but with the nonlinearity applied to the output too.
+    pub fn encoder(alloc: &mut ParamAlloc, sizes: &[usize], activation: Activation) -> Self {
+        Self {
+            activate_last: true,
+            ..Self::new(alloc, sizes, activation)
+        }
+    }
+
+    /// Input features.
+    pub fn inp(&self) -> usize {
+        self.layers.first().map_or(0, |l| l.inp)
+    }
+
+    /// Output features.
+    pub fn out(&self) -> usize {
+        self.layers.last().map_or(0, |l| l.out)
+    }
+
+    /// Initialises hidden layers with gain √2 (ReLU) or 1 (tanh) and the last with `last_gain`.
+    pub fn init(&self, params: &mut [f32], rng: &mut RngStream, last_gain: f32) {
+        let hidden_gain = match self.activation {
+            Activation::Relu => std::f32::consts::SQRT_2,
+            Activation::Tanh => 1.0,
+        };
+        let n = self.layers.len();
+        for (i, l) in self.layers.iter().enumerate() {
+            l.init(params, rng, if i + 1 == n { last_gain } else { hidden_gain });
+        }
+    }
+
+    /// Forward pass over `batch` rows of `x`; returns the output `[batch, out]`.
+    pub fn forward<'w>(
+        &self,
+        params: &[f32],
+        x: &[f32],
+        batch: usize,
+        ws: &'w mut MlpWs,
+    ) -> &'w [f32] {
+        if ws.outs.len() != self.layers.len() {
+            ws.outs = vec![Vec::new(); self.layers.len()];
+        }
+        ws.batch = batch;
+        let n = self.layers.len();
+        for i in 0..n {
+            let layer = &self.layers[i];
+            let (before, rest) = ws.outs.split_at_mut(i);
+            let out = &mut rest[0];
+            ensure(out, batch * layer.out);
+            let input: &[f32] = if i == 0 { x } else { &before[i - 1] };
+            layer.forward(params, input, batch, out);
+            if i + 1 < n || self.activate_last {
+                self.activation.apply(&mut out[..batch * layer.out]);
+            }
+        }
+        ws.outs.last().map_or(&[][..], |o| &o[..batch * self.out()])
+    }
+
+    /// The output of the last [`forward`](Self::forward).
+    pub fn output<'w>(&self, ws: &'w MlpWs) -> &'w [f32] {
+        ws.outs
+            .last()
+            .map_or(&[][..], |o| &o[..ws.batch * self.out()])
+    }
+
+    /// Backward pass for the last forward over `x`: accumulates parameter gradients and writes the
+    /// input gradient into `dx` when asked.
+    pub fn backward(
+        &self,
+        params: &[f32],
+        grads: &mut [f32],
+        x: &[f32],
+        dout: &[f32],
+        ws: &mut MlpWs,
+        dx: Option<&mut [f32]>,
+    ) {
+        let batch = ws.batch;
+        let n = self.layers.len();
+        let MlpWs { outs, d_a, d_b, .. } = ws;
+        ensure(d_a, batch * self.out());
+        d_a[..batch * self.out()].copy_from_slice(&dout[..batch * self.out()]);
+        if self.activate_last
+            && let Some(last) = outs.last()
+        {
+            self.activation
+                .backward(&last[..batch * self.out()], &mut d_a[..batch * self.out()]);
+        }
+        let mut dx = dx;
+        for i in (0..n).rev() {
+            let layer = &self.layers[i];
+            let input: &[f32] = if i == 0 { x } else { &outs[i - 1] };
+            if i == 0 {
+                layer.backward(params, grads, input, d_a, batch, dx.as_deref_mut());
+            } else {
+                ensure(d_b, batch * layer.inp);
+                layer.backward(params, grads, input, d_a, batch, Some(d_b));
+                self.activation
+                    .backward(&outs[i - 1][..batch * layer.inp], &mut d_b[..batch * layer.inp]);
+                std::mem::swap(d_a, d_b);
+            }
+        }
+    }
+}
+
+/// Global L2 norm of `grads`.
+pub fn grad_norm(grads: &[f32]) -> f32 {
+    grads
+        .iter()
+        .map(|g| f64::from(*g) * f64::from(*g))
+        .sum::<f64>()
+        .sqrt() as f32
+}
+
+/// Scales `grads` so that their global norm is at most `max_norm` (no-op when `max_norm <= 0`).
+/// Returns the norm before clipping.
+///
+/// ```
+/// let mut g = vec![3.0, 4.0];
+/// assert_eq!(a2perf_baselines::nn::clip_grad_norm(&mut g, 1.0), 5.0);
+/// assert!((g[0] - 0.6).abs() < 1e-6);
+/// ```
+pub fn clip_grad_norm(grads: &mut [f32], max_norm: f32) -> f32 {
+    let norm = grad_norm(grads);
+    if max_norm > 0.0 && norm > max_norm {
+        let s = max_norm / (norm + 1e-6);
+        grads.iter_mut().for_each(|g| *g *= s);
+    }
+    norm
+}
+
+/// `target ← (1−τ)·target + τ·online` (Polyak averaging of target networks).
+pub fn polyak(target: &mut [f32], online: &[f32], tau: f32) {
+    for (t, o) in target.iter_mut().zip(online) {
+        *t += tau * (o - *t);
+    }
+}

@@ -1,0 +1,105 @@
+//! Adam with bias correction and learning-rate schedules.
+
+use serde::{Deserialize, Serialize};
+
+/// Adam (Kingma & Ba) with the paper baselines' `eps = 1e-5`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Adam {
+    /// First-moment decay.
+    pub beta1: f32,
+    /// Second-moment decay.
+    pub beta2: f32,
+    /// Denominator fuzz (TF-Agents baselines use 1e-5).
+    pub eps: f32,
+    m: Vec<f32>,
+    v: Vec<f32>,
+    t: u64,
+}
+
+impl Adam {
+    /// Optimiser state for `n` parameters.
+    pub fn new(n: usize) -> Self {
+        Self {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-5,
+            m: vec![0.0; n],
+            v: vec![0.0; n],
+            t: 0,
+        }
+    }
+
+    /// Number of updates applied.
+    pub fn steps(&self) -> u64 {
+        self.t
+    }
+
+    /// One descent step `params −= lr · m̂ / (√v̂ + eps)`.
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::optim::Adam;
+    /// let mut p = vec![1.0f32];
+    /// let mut adam = Adam::new(1);
+    /// for _ in 0..500 { let g = vec![2.0 * p[0]]; adam.step(&mut p, &g, 0.05); }
+    /// assert!(p[0].abs() < 0.05);
+    /// ```
+    pub fn step(&mut self, params: &mut [f32], grads: &[f32], lr: f32) {
+        self.t += 1;
+        let t = self.t as i32;
+        let c1 = 1.0 - self.beta1.powi(t);
+        let c2 = 1.0 - self.beta2.powi(t);
+        let step = lr * c2.sqrt() / c1;
+        let eps = self.eps * c2.sqrt();
+        for (((p, g), m), v) in params
+            .iter_mut()
+            .zip(grads)
+            .zip(self.m.iter_mut())
+            .zip(self.v.iter_mut())
+        {
+            *m = self.beta1 * *m + (1.0 - self.beta1) * g;
+            *v = self.beta2 * *v + (1.0 - self.beta2) * g * g;
+            *p -= step * *m / (v.sqrt() + eps);
+        }
+    }
+}
+
+/// Learning rate as a function of training progress.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum LrSchedule {
+    /// Fixed learning rate.
+    Constant(f32),
+    /// Cosine decay from `initial` to `initial · final_fraction` (TF `CosineDecay(alpha)`, used by
+    /// the circuit-training PPO baseline with `alpha = 0.1`).
+    Cosine {
+        /// Initial learning rate.
+        initial: f32,
+        /// Final learning rate as a fraction of the initial one.
+        final_fraction: f32,
+    },
+}
+
+impl LrSchedule {
+    /// Learning rate at `progress ∈ [0, 1]`.
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::optim::LrSchedule;
+    /// let s = LrSchedule::Cosine { initial: 1.0, final_fraction: 0.1 };
+    /// assert_eq!(s.at(0.0), 1.0);
+    /// assert!((s.at(1.0) - 0.1).abs() < 1e-6);
+    /// ```
+    pub fn at(&self, progress: f64) -> f32 {
+        match *self {
+            LrSchedule::Constant(lr) => lr,
+            LrSchedule::Cosine {
+                initial,
+                final_fraction,
+            } => {
+                let p = progress.clamp(0.0, 1.0);
+                let cos = 0.5 * (1.0 + (std::f64::consts::PI * p).cos());
+                (f64::from(initial)
+                    * (f64::from(final_fraction) + (1.0 - f64::from(final_fraction)) * cos))
+                    as f32
+            }
+        }
+    }
+}

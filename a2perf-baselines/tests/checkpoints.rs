@@ -1,0 +1,122 @@
+//! Checkpoints round-trip bit-exactly and bad payloads are rejected with clear errors.
+
+mod common;
+
+use a2perf_baselines::NetPolicy;
+use a2perf_core::{ActMode, Checkpoint, Env, Policy, Registry, RngStream, TrainingSettings, Value};
+use common::*;
+
+fn settings() -> TrainingSettings {
+    TrainingSettings {
+        total_env_steps: 300,
+        eval_interval: 0,
+        eval_episodes: 2,
+        checkpoint_interval: 0,
+        num_envs: 2,
+    }
+}
+
+fn registry() -> Registry {
+    let mut reg = Registry::new();
+    a2perf_baselines::register(&mut reg);
+    reg
+}
+
+fn trained(name: &str, continuous: bool) -> (Box<dyn Policy>, a2perf_core::EnvSpec) {
+    let mut alg = make_alg(name, &[("hidden_sizes", ints(&[8]))]);
+    if continuous {
+        let (p, _) = train(alg.as_mut(), || Box::new(Point::new()), 1, settings());
+        (p, Point::new().spec().clone())
+    } else {
+        let (p, _) = train(alg.as_mut(), || Box::new(MaskedBandit::new()), 1, settings());
+        (p, MaskedBandit::new().spec().clone())
+    }
+}
+
+#[test]
+fn round_trip_is_bit_exact_for_every_algorithm() {
+    let reg = registry();
+    for (name, continuous) in [("ppo", false), ("ppo", true), ("ddqn", false), ("sac", true)] {
+        let (mut policy, spec) = trained(name, continuous);
+        let ckpt = policy.checkpoint().unwrap();
+        let bytes = ckpt.to_bytes();
+        let back = Checkpoint::from_bytes(&bytes).unwrap();
+        let mut loaded = (reg.algorithm(name).unwrap().load_policy)(&back, &spec).unwrap();
+        // Re-encoding the loaded policy gives the same bytes: parameters and statistics are exact.
+        assert_eq!(loaded.checkpoint().unwrap().to_bytes(), bytes, "{name}");
+        let mut env: Box<dyn Env> = if continuous { Box::new(Point::new()) } else { Box::new(MaskedBandit::new()) };
+        let mut obs = env.reset(Some(3)).unwrap();
+        for _ in 0..5 {
+            let a = policy.act(&obs, ActMode::Greedy).unwrap();
+            assert_eq!(a, loaded.act(&obs, ActMode::Greedy).unwrap(), "{name}");
+            let s = env.step(&a).unwrap();
+            obs = if s.done() { env.reset(None).unwrap() } else { s.observation };
+        }
+    }
+}
+
+#[test]
+fn corrupt_and_mismatched_payloads_are_rejected() {
+    let (policy, spec) = trained("ppo", false);
+    let good = policy.checkpoint().unwrap();
+    let load = |c: &Checkpoint, s: &a2perf_core::EnvSpec| NetPolicy::from_checkpoint(c, s, "ppo").map(|_| ()).unwrap_err().to_string();
+
+    let mut c = good.clone();
+    c.payload.truncate(c.payload.len() - 3);
+    assert!(load(&c, &spec).contains("truncated"), "{}", load(&c, &spec));
+
+    let mut c = good.clone();
+    c.payload.push(0);
+    assert!(load(&c, &spec).contains("trailing"));
+
+    let mut c = good.clone();
+    c.payload[0] = b'X';
+    assert!(load(&c, &spec).contains("magic"));
+
+    let mut c = good.clone();
+    c.format_version = 99;
+    assert!(load(&c, &spec).contains("version 99"));
+
+    let mut c = good.clone();
+    c.algorithm = "ddqn".into();
+    assert!(load(&c, &spec).contains("written by `ddqn`"));
+
+    let mut c = good.clone();
+    c.payload[12] = b'#'; // inside the JSON header
+    assert!(load(&c, &spec).contains("malformed header"));
+
+    // A checkpoint for the bandit does not load on the gridworld.
+    let other = Grid::new().spec().clone();
+    assert!(load(&good, &other).contains("trained on observations"));
+
+    // Non-finite parameters are refused.
+    let mut c = good.clone();
+    let n = c.payload.len();
+    let hlen = u32::from_le_bytes(c.payload[8..12].try_into().unwrap()) as usize;
+    let first_param = 12 + hlen + 8;
+    c.payload[first_param..first_param + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    assert!(n > first_param);
+    assert!(load(&c, &spec).contains("non-finite"));
+
+    // The container's checksum catches bit flips anywhere in the file.
+    let mut bytes = good.to_bytes();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x10;
+    assert!(Checkpoint::from_bytes(&bytes).is_err());
+}
+
+#[test]
+fn checkpoints_flow_through_the_training_context() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut alg = make_alg("ppo", &[("hidden_sizes", ints(&[8])), ("num_steps", Value::Int(16))]);
+    let factory = |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> { Ok(Box::new(MaskedBandit::new())) };
+    let mut sink = a2perf_core::DirectoryCheckpoints::new(dir.path());
+    let s = TrainingSettings { total_env_steps: 320, eval_interval: 64, eval_episodes: 2, checkpoint_interval: 100, num_envs: 2 };
+    let mut ctx = a2perf_core::TrainingContext::new(&factory, 0, s, &mut sink, a2perf_core::CancelToken::new());
+    let _ = a2perf_core::Algorithm::train(alg.as_mut(), &mut ctx).unwrap();
+    assert!(ctx.curve().points.len() >= 4);
+    let files = std::fs::read_dir(dir.path()).unwrap().count();
+    assert!(files >= 3, "{files} checkpoints");
+    let mut rng = RngStream::new(0, "x");
+    let _ = rng.next_u64();
+}

@@ -1,0 +1,294 @@
+//! Learning tests on the real domains (release builds only: `cargo test --release`).
+//!
+//! Each test uses fixed seeds and a budget that finishes well under a minute on one core; in debug
+//! builds they print why they are skipped.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use a2perf_baselines::dataset::{Dataset, Sample};
+use a2perf_baselines::{Bc, register};
+use a2perf_core::{
+    ActMode, Action, Algorithm, CancelToken, DiscardCheckpoints, Env, EnvError, Params, Policy,
+    RandomPolicy, Registry, Step, TrainingContext, TrainingSettings, Value,
+};
+use common::ints;
+
+fn skip_in_debug(name: &str) -> bool {
+    if cfg!(debug_assertions) {
+        println!("skipping {name}: domain learning tests run only in release builds (cargo test --release)");
+        return true;
+    }
+    false
+}
+
+fn registry() -> Registry {
+    let mut reg = Registry::new();
+    register(&mut reg);
+    a2perf_web::register(&mut reg);
+    a2perf_circuit::register(&mut reg);
+    a2perf_locomotion::register(&mut reg);
+    reg
+}
+
+fn env_params(pairs: &[(&str, Value)]) -> BTreeMap<String, Value> {
+    pairs.iter().map(|(k, v)| (k.to_string(), v.clone())).collect()
+}
+
+fn train_on(
+    reg: &Registry,
+    alg: &mut dyn Algorithm,
+    env_id: &str,
+    params: &BTreeMap<String, Value>,
+    seed: u64,
+    settings: TrainingSettings,
+) -> (Box<dyn Policy>, a2perf_core::LearningCurve) {
+    let reg2 = reg.clone();
+    let id = env_id.to_string();
+    let p = params.clone();
+    let factory = move |_i: usize| -> Result<Box<dyn Env>, EnvError> {
+        reg2.make_env(&id, &p).map_err(|e| EnvError::Backend(e.to_string()))
+    };
+    let mut sink = DiscardCheckpoints;
+    let mut ctx = TrainingContext::new(&factory, seed, settings, &mut sink, CancelToken::new());
+    let policy = alg.train(&mut ctx).expect("training");
+    let curve = ctx.take_curve();
+    (policy, curve)
+}
+
+fn make(reg: &Registry, name: &str, hp: &[(&str, Value)]) -> Box<dyn Algorithm> {
+    reg.make_algorithm(name, &env_params(hp)).expect("hyperparameters")
+}
+
+/// Runs one episode; returns (return, final info "success", final info "proxy").
+fn episode(env: &mut dyn Env, policy: &mut dyn Policy, seed: u64, mode: ActMode) -> (f64, f64, Option<f64>) {
+    let limit = env.spec().max_episode_steps.unwrap_or(10_000);
+    let mut step = Step::default();
+    env.reset_into(Some(seed), &mut step.observation).expect("reset");
+    let mut ret = 0.0;
+    for _ in 0..limit {
+        let a = policy.act(&step.observation, mode).expect("act");
+        env.step_into(&a, &mut step).expect("step");
+        ret += step.reward;
+        if step.done() {
+            break;
+        }
+    }
+    (ret, step.info.get("success").unwrap_or(0.0), step.info.get("proxy"))
+}
+
+// ---------------------------------------------------------------- web navigation
+
+const WEB: &str = "WebNavigation-Difficulty-01-v0";
+
+fn web_params() -> BTreeMap<String, Value> {
+    env_params(&[("num_websites", Value::Int(1))])
+}
+
+fn web_success(reg: &Registry, policy: &mut dyn Policy, episodes: u64) -> f64 {
+    let mut env = reg.make_env(WEB, &web_params()).unwrap();
+    (0..episodes).map(|s| episode(env.as_mut(), policy, 50_000 + s, ActMode::Greedy).1).sum::<f64>() / episodes as f64
+}
+
+fn web_net() -> Vec<(&'static str, Value)> {
+    vec![("embedding_dim", Value::Int(32)), ("latent_dim", Value::Int(32))]
+}
+
+#[test]
+fn ppo_learns_web_navigation_level_1() {
+    if skip_in_debug("ppo_learns_web_navigation_level_1") {
+        return;
+    }
+    let reg = registry();
+    let mut hp = web_net();
+    hp.extend([
+        ("learning_rate", Value::Float(1e-3)),
+        ("num_steps", Value::Int(64)),
+        ("minibatch_size", Value::Int(64)),
+        ("gamma", Value::Float(0.95)),
+    ]);
+    let mut alg = make(&reg, "ppo", &hp);
+    let s = TrainingSettings { total_env_steps: 12_000, eval_interval: 3_000, eval_episodes: 10, checkpoint_interval: 0, num_envs: 4 };
+    let (mut p, curve) = train_on(&reg, alg.as_mut(), WEB, &web_params(), 0, s);
+    let success = web_success(&reg, p.as_mut(), 50);
+    println!("PPO web success {success}, curve {:?}", curve.returns());
+    assert!(success >= 0.9, "PPO greedy success {success}; curve {:?}", curve.returns());
+}
+
+#[test]
+fn ddqn_learns_web_navigation_level_1() {
+    if skip_in_debug("ddqn_learns_web_navigation_level_1") {
+        return;
+    }
+    let reg = registry();
+    let mut hp = web_net();
+    hp.extend([
+        ("learning_rate", Value::Float(1e-3)),
+        ("batch_size", Value::Int(64)),
+        ("replay_capacity", Value::Int(5_000)),
+        ("learning_starts", Value::Int(500)),
+        ("updates_per_step", Value::Float(0.25)),
+        ("target_update_period", Value::Int(100)),
+        ("epsilon_greedy", Value::Float(0.1)),
+        ("epsilon_decay_fraction", Value::Float(0.3)),
+        ("gamma", Value::Float(0.95)),
+    ]);
+    let mut alg = make(&reg, "ddqn", &hp);
+    let s = TrainingSettings { total_env_steps: 12_000, eval_interval: 3_000, eval_episodes: 10, checkpoint_interval: 0, num_envs: 4 };
+    let (mut p, curve) = train_on(&reg, alg.as_mut(), WEB, &web_params(), 0, s);
+    let success = web_success(&reg, p.as_mut(), 50);
+    println!("DDQN web success {success}, curve {:?}", curve.returns());
+    assert!(success >= 0.9, "DDQN greedy success {success}; curve {:?}", curve.returns());
+}
+
+#[test]
+fn bc_clones_the_web_oracle() {
+    if skip_in_debug("bc_clones_the_web_oracle") {
+        return;
+    }
+    let reg = registry();
+    let mut cfg = a2perf_web::WebNavConfig::new(1);
+    cfg.num_websites = 1;
+    let mut env = a2perf_web::WebNavEnv::new(cfg).expect("web env");
+    let mut samples = Vec::new();
+    let mut oracle_success = 0.0;
+    let episodes = 60;
+    for e in 0..episodes {
+        let mut obs = env.reset(Some(e)).unwrap();
+        while let Some(a) = env.oracle_action() {
+            samples.push(Sample { observation: obs.clone(), action: Action::Discrete(a) });
+            let step = env.step(&Action::Discrete(a)).unwrap();
+            if step.done() {
+                oracle_success += step.info.get("success").unwrap_or(0.0);
+                break;
+            }
+            obs = step.observation;
+        }
+    }
+    let oracle_success = oracle_success / episodes as f64;
+    let mut given: BTreeMap<String, Value> = BTreeMap::new();
+    for (k, v) in web_net() {
+        given.insert(k.into(), v);
+    }
+    given.insert("learning_rate".into(), Value::Float(1e-3));
+    given.insert("batch_size".into(), Value::Int(64));
+    let bc = Bc::from_params(&Params::resolve(&Bc::params(), &given).unwrap()).unwrap();
+    let mut bc = bc.with_loader(Arc::new(Dataset { env_id: Some(WEB.into()), samples }));
+    let s = TrainingSettings { total_env_steps: 64 * 600, eval_interval: 0, eval_episodes: 5, checkpoint_interval: 0, num_envs: 1 };
+    let (mut p, _) = train_on(&reg, &mut bc, WEB, &web_params(), 0, s);
+    let success = web_success(&reg, p.as_mut(), 50);
+    println!("BC web success {success}, oracle {oracle_success}");
+    assert!(oracle_success > 0.9, "oracle success {oracle_success}");
+    assert!(success >= 0.9 * oracle_success, "BC success {success} vs oracle {oracle_success}");
+}
+
+// ---------------------------------------------------------------- circuit training
+
+const CIRCUIT: &str = "CircuitTraining-Synthetic-Small-v0";
+
+fn random_mean_cost(reg: &Registry) -> f64 {
+    let mut env = reg.make_env(CIRCUIT, &BTreeMap::new()).unwrap();
+    let mut rp = RandomPolicy::new(env.spec().action_space.clone(), 7);
+    (0..100).map(|s| -episode(env.as_mut(), &mut rp, s, ActMode::Explore).0).sum::<f64>() / 100.0
+}
+
+fn greedy_cost(reg: &Registry, policy: &mut dyn Policy) -> f64 {
+    let mut env = reg.make_env(CIRCUIT, &BTreeMap::new()).unwrap();
+    -episode(env.as_mut(), policy, 0, ActMode::Greedy).0
+}
+
+#[test]
+fn ppo_and_ddqn_beat_random_placement() {
+    if skip_in_debug("ppo_and_ddqn_beat_random_placement") {
+        return;
+    }
+    let reg = registry();
+    let random = random_mean_cost(&reg);
+    let mut ppo = make(&reg, "ppo", &[
+        ("learning_rate", Value::Float(1e-3)),
+        ("num_steps", Value::Int(48)),
+        ("minibatch_size", Value::Int(64)),
+        ("gamma", Value::Float(1.0)),
+        ("gae_lambda", Value::Float(1.0)),
+        ("latent_dim", Value::Int(16)),
+        ("hidden_sizes", ints(&[64, 64])),
+    ]);
+    let s = TrainingSettings { total_env_steps: 6_000, eval_interval: 1_500, eval_episodes: 1, checkpoint_interval: 0, num_envs: 4 };
+    let (mut p, curve) = train_on(&reg, ppo.as_mut(), CIRCUIT, &BTreeMap::new(), 0, s.clone());
+    let cost = greedy_cost(&reg, p.as_mut());
+    println!("PPO circuit cost {cost} vs random {random}; curve {:?}", curve.returns());
+    assert!(cost <= 0.9 * random, "PPO cost {cost} vs random mean {random}");
+
+    let mut ddqn = make(&reg, "ddqn", &[
+        ("learning_rate", Value::Float(1e-3)),
+        ("batch_size", Value::Int(64)),
+        ("learning_starts", Value::Int(300)),
+        ("updates_per_step", Value::Float(0.5)),
+        ("target_update_period", Value::Int(50)),
+        ("epsilon_greedy", Value::Float(0.1)),
+        ("epsilon_decay_fraction", Value::Float(0.5)),
+        ("gamma", Value::Float(1.0)),
+        ("latent_dim", Value::Int(16)),
+        ("hidden_sizes", ints(&[64, 64])),
+    ]);
+    let (mut q, curve) = train_on(&reg, ddqn.as_mut(), CIRCUIT, &BTreeMap::new(), 0, s);
+    let cost = greedy_cost(&reg, q.as_mut());
+    println!("DDQN circuit cost {cost} vs random {random}; curve {:?}", curve.returns());
+    assert!(cost <= 0.9 * random, "DDQN cost {cost} vs random mean {random}");
+}
+
+// ---------------------------------------------------------------- locomotion
+
+const PACE: &str = "QuadrupedLocomotion-DogPace-v0";
+
+struct Zero(usize);
+impl Policy for Zero {
+    fn act(&mut self, _o: &a2perf_core::Observation, _m: ActMode) -> Result<Action, a2perf_core::PolicyError> {
+        Ok(Action::Continuous(vec![0.0; self.0]))
+    }
+    fn checkpoint(&self) -> Result<a2perf_core::Checkpoint, a2perf_core::PolicyError> {
+        Err(a2perf_core::PolicyError::BadCheckpoint("zero policy".into()))
+    }
+}
+
+fn pace_return(reg: &Registry, policy: &mut dyn Policy) -> f64 {
+    let mut env = reg.make_env(PACE, &BTreeMap::new()).unwrap();
+    (0..5).map(|s| episode(env.as_mut(), policy, 70_000 + s, ActMode::Greedy).0).sum::<f64>() / 5.0
+}
+
+#[test]
+fn ppo_and_sac_improve_the_pace_task() {
+    if skip_in_debug("ppo_and_sac_improve_the_pace_task") {
+        return;
+    }
+    let reg = registry();
+    let base = pace_return(&reg, &mut Zero(12));
+    let mut ppo = make(&reg, "ppo", &[
+        ("learning_rate", Value::Float(3e-4)),
+        ("num_steps", Value::Int(256)),
+        ("minibatch_size", Value::Int(128)),
+        ("hidden_sizes", ints(&[64, 64])),
+        ("init_log_std", Value::Float(-1.5)),
+    ]);
+    let s = TrainingSettings { total_env_steps: 12_000, eval_interval: 0, eval_episodes: 2, checkpoint_interval: 0, num_envs: 2 };
+    let (mut p, curve) = train_on(&reg, ppo.as_mut(), PACE, &BTreeMap::new(), 0, s.clone());
+    let r = pace_return(&reg, p.as_mut());
+    println!("PPO pace return {r} vs zero-action {base}; curve {:?}", curve.returns());
+    assert!(r > base, "PPO {r} vs untrained {base}");
+
+    let mut sac = make(&reg, "sac", &[
+        ("batch_size", Value::Int(128)),
+        ("learning_starts", Value::Int(1000)),
+        ("updates_per_step", Value::Float(0.5)),
+        ("init_alpha", Value::Float(0.05)),
+        ("action_limit", Value::Float(0.5)),
+        ("hidden_sizes", ints(&[64, 64])),
+    ]);
+    let s = TrainingSettings { total_env_steps: 6_000, eval_interval: 0, eval_episodes: 2, checkpoint_interval: 0, num_envs: 2 };
+    let (mut q, curve) = train_on(&reg, sac.as_mut(), PACE, &BTreeMap::new(), 0, s);
+    let r = pace_return(&reg, q.as_mut());
+    println!("SAC pace return {r} vs zero-action {base}; curve {:?}", curve.returns());
+    assert!(r > base, "SAC {r} vs untrained {base}");
+}

@@ -1,0 +1,281 @@
+//! Gradient checks of every layer, network and loss against central finite differences.
+
+mod common;
+
+use a2perf_baselines::batch::{ObsBatch, ObsLayout};
+use a2perf_baselines::model::{DiscreteNet, NetOptions};
+use a2perf_baselines::nn::dist::{gaussian, masked, tanh_gaussian};
+use a2perf_baselines::nn::embed::Embedding;
+use a2perf_baselines::nn::{Activation, Linear, Mlp, MlpWs, ParamAlloc};
+use a2perf_core::RngStream;
+use proptest::prelude::*;
+
+/// Compares analytic and numeric derivatives; f32 nets, so tolerances are relative 3e-2 plus
+/// absolute 2e-3, and `allowed_misses` lets a ReLU kink crossed by the finite difference pass.
+fn compare(analytic: &[f64], numeric: &[f64], allowed_misses: usize) -> Result<(), TestCaseError> {
+    let mut misses = Vec::new();
+    for (i, (a, n)) in analytic.iter().zip(numeric).enumerate() {
+        let tol = 3e-2 * a.abs().max(n.abs()) + 2e-3;
+        if (a - n).abs() > tol {
+            misses.push((i, *a, *n));
+        }
+    }
+    prop_assert!(
+        misses.len() <= allowed_misses,
+        "{} of {} derivatives disagree: {:?}",
+        misses.len(),
+        analytic.len(),
+        &misses[..misses.len().min(5)]
+    );
+    Ok(())
+}
+
+fn fd(mut f: impl FnMut(f32) -> f64, x0: f32, h: f32) -> f64 {
+    (f(x0 + h) - f(x0 - h)) / (2.0 * f64::from(h))
+}
+
+fn rand_vec(rng: &mut RngStream, n: usize, s: f64) -> Vec<f32> {
+    (0..n).map(|_| (rng.normal() * s) as f32).collect()
+}
+
+fn dot(a: &[f32], b: &[f32]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| f64::from(*x) * f64::from(*y)).sum()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    #[test]
+    fn linear_gradients(seed in 0u64..1000, inp in 1usize..6, out in 1usize..5, batch in 1usize..4) {
+        let mut rng = RngStream::new(seed, "lin");
+        let mut alloc = ParamAlloc::new();
+        let layer = Linear::new(&mut alloc, inp, out);
+        let mut p = rand_vec(&mut rng, alloc.len(), 0.5);
+        let mut x = rand_vec(&mut rng, batch * inp, 1.0);
+        let c = rand_vec(&mut rng, batch * out, 1.0);
+        let mut y = vec![0.0; batch * out];
+        let mut g = vec![0.0; p.len()];
+        let mut dx = vec![0.0; x.len()];
+        layer.forward(&p, &x, batch, &mut y);
+        layer.backward(&p, &mut g, &x, &c, batch, Some(&mut dx));
+        let mut num = Vec::new();
+        for i in 0..p.len() {
+            let p0 = p[i];
+            num.push(fd(|v| { p[i] = v; layer.forward(&p, &x, batch, &mut y); dot(&y, &c) }, p0, 1e-2));
+            p[i] = p0;
+        }
+        compare(&g.iter().map(|v| f64::from(*v)).collect::<Vec<_>>(), &num, 0)?;
+        let mut numx = Vec::new();
+        for i in 0..x.len() {
+            let x0 = x[i];
+            numx.push(fd(|v| { x[i] = v; layer.forward(&p, &x, batch, &mut y); dot(&y, &c) }, x0, 1e-2));
+            x[i] = x0;
+        }
+        compare(&dx.iter().map(|v| f64::from(*v)).collect::<Vec<_>>(), &numx, 0)?;
+    }
+
+    #[test]
+    fn mlp_gradients(seed in 0u64..1000, relu in any::<bool>(), encoder in any::<bool>(), batch in 1usize..4) {
+        let mut rng = RngStream::new(seed, "mlp");
+        let mut alloc = ParamAlloc::new();
+        let act = if relu { Activation::Relu } else { Activation::Tanh };
+        let mlp = if encoder { Mlp::encoder(&mut alloc, &[3, 5, 4], act) } else { Mlp::new(&mut alloc, &[3, 5, 4, 2], act) };
+        let mut p = rand_vec(&mut rng, alloc.len(), 0.7);
+        let mut x = rand_vec(&mut rng, batch * 3, 1.0);
+        let c = rand_vec(&mut rng, batch * mlp.out(), 1.0);
+        let mut ws = MlpWs::default();
+        let mut g = vec![0.0; p.len()];
+        let mut dx = vec![0.0; x.len()];
+        mlp.forward(&p, &x, batch, &mut ws);
+        mlp.backward(&p, &mut g, &x, &c, &mut ws, Some(&mut dx));
+        let mut num = Vec::new();
+        for i in 0..p.len() {
+            let p0 = p[i];
+            num.push(fd(|v| { p[i] = v; dot(mlp.forward(&p, &x, batch, &mut ws), &c) }, p0, 3e-3));
+            p[i] = p0;
+        }
+        let misses = if relu { 2 } else { 0 };
+        compare(&g.iter().map(|v| f64::from(*v)).collect::<Vec<_>>(), &num, misses)?;
+        let mut numx = Vec::new();
+        for i in 0..x.len() {
+            let x0 = x[i];
+            numx.push(fd(|v| { x[i] = v; dot(mlp.forward(&p, &x, batch, &mut ws), &c) }, x0, 3e-3));
+            x[i] = x0;
+        }
+        compare(&dx.iter().map(|v| f64::from(*v)).collect::<Vec<_>>(), &numx, misses)?;
+    }
+
+    #[test]
+    fn embedding_pool_gradients(seed in 0u64..1000, groups in 1usize..4, len in 1usize..5) {
+        let mut rng = RngStream::new(seed, "emb");
+        let mut alloc = ParamAlloc::new();
+        let e = Embedding::new(&mut alloc, 6, 3);
+        let mut p = rand_vec(&mut rng, alloc.len(), 1.0);
+        // Includes padding (0) and out-of-vocabulary ids (≥ 6).
+        let tokens: Vec<f32> = (0..groups * len).map(|_| rng.index(9) as f32).collect();
+        let c = rand_vec(&mut rng, groups * 3, 1.0);
+        let mut out = vec![0.0; groups * 3];
+        let mut g = vec![0.0; p.len()];
+        e.pool(&p, &tokens, len, &mut out);
+        e.pool_backward(&mut g, &tokens, len, &c);
+        let mut num = Vec::new();
+        for i in 0..p.len() {
+            let p0 = p[i];
+            num.push(fd(|v| { p[i] = v; e.pool(&p, &tokens, len, &mut out); dot(&out, &c) }, p0, 1e-2));
+            p[i] = p0;
+        }
+        compare(&g.iter().map(|v| f64::from(*v)).collect::<Vec<_>>(), &num, 0)?;
+    }
+
+    #[test]
+    fn masked_categorical_gradients(seed in 0u64..1000, n in 2usize..9, entropy_w in -1.0f32..1.0) {
+        let mut rng = RngStream::new(seed, "cat");
+        let mut z = rand_vec(&mut rng, n, 1.5);
+        let mut mask: Vec<bool> = (0..n).map(|_| rng.uniform() < 0.7).collect();
+        mask[0] = true;
+        let legal: Vec<usize> = (0..n).filter(|i| mask[*i]).collect();
+        let a = legal[rng.index(legal.len())];
+        let mut lp = vec![0.0; n];
+        // f = log p(a) + w·H
+        let f = |z: &[f32], lp: &mut Vec<f32>| {
+            masked::log_softmax(z, Some(&mask), lp);
+            f64::from(lp[a]) + f64::from(entropy_w) * f64::from(masked::entropy(lp))
+        };
+        f(&z, &mut lp);
+        let mut g = vec![0.0; n];
+        masked::grad_logp(&lp, a, 1.0, &mut g);
+        masked::grad_entropy(&lp, entropy_w, &mut g);
+        for (i, m) in mask.iter().enumerate() {
+            if !m { prop_assert_eq!(g[i], 0.0); prop_assert_eq!(lp[i], f32::NEG_INFINITY); }
+        }
+        let mut num = Vec::new();
+        for i in 0..n {
+            let z0 = z[i];
+            num.push(fd(|v| { z[i] = v; f(&z, &mut lp) }, z0, 1e-2));
+            z[i] = z0;
+        }
+        compare(&g.iter().map(|v| f64::from(*v)).collect::<Vec<_>>(), &num, 0)?;
+        let total: f64 = { f(&z, &mut lp); lp.iter().filter(|l| l.is_finite()).map(|l| f64::from(l.exp())).sum() };
+        prop_assert!((total - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn gaussian_gradients(seed in 0u64..1000, d in 1usize..5) {
+        let mut rng = RngStream::new(seed, "gauss");
+        let mut v = rand_vec(&mut rng, 2 * d, 0.5);
+        let a = rand_vec(&mut rng, d, 1.0);
+        let f = |v: &[f32]| f64::from(gaussian::log_prob(&v[..d], &v[d..], &a));
+        let mut dm = vec![0.0; d];
+        let mut ds = vec![0.0; d];
+        gaussian::grad_log_prob(&v[..d], &v[d..], &a, 1.0, &mut dm, &mut ds);
+        let analytic: Vec<f64> = dm.iter().chain(&ds).map(|x| f64::from(*x)).collect();
+        let mut num = Vec::new();
+        for i in 0..2 * d {
+            let v0 = v[i];
+            num.push(fd(|x| { v[i] = x; f(&v) }, v0, 1e-2));
+            v[i] = v0;
+        }
+        compare(&analytic, &num, 0)?;
+    }
+
+    #[test]
+    fn tanh_gaussian_gradients(seed in 0u64..1000, d in 1usize..4, w_logp in -1.0f32..1.0) {
+        let mut rng = RngStream::new(seed, "tanh");
+        let mut v = rand_vec(&mut rng, 2 * d, 0.5);
+        let eps = rand_vec(&mut rng, d, 1.0);
+        let w = rand_vec(&mut rng, d, 1.0);
+        let mut a = vec![0.0; d];
+        let mut f = |v: &[f32]| {
+            let lp = tanh_gaussian::sample(&v[..d], &v[d..], &eps, &mut a);
+            dot(&a, &w) + f64::from(w_logp) * f64::from(lp)
+        };
+        let mut dm = vec![0.0; d];
+        let mut dr = vec![0.0; d];
+        tanh_gaussian::backward(&v[..d], &v[d..], &eps, &w, w_logp, &mut dm, &mut dr);
+        let analytic: Vec<f64> = dm.iter().chain(&dr).map(|x| f64::from(*x)).collect();
+        let mut num = Vec::new();
+        for i in 0..2 * d {
+            let v0 = v[i];
+            num.push(fd(|x| { v[i] = x; f(&v) }, v0, 1e-3));
+            v[i] = v0;
+        }
+        compare(&analytic, &num, 0)?;
+    }
+}
+
+/// Checks a discrete network's parameter gradients of `Σ c·logits + Σ cv·values` at up to 60
+/// parameters.
+fn check_net(net: &mut DiscreteNet, batch: &ObsBatch, seed: u64) -> Result<(), TestCaseError> {
+    let mut rng = RngStream::new(seed, "net");
+    let mut p = net.init_params(&mut rng);
+    // Larger output weights than the near-uniform init so every path carries gradient.
+    for v in p.iter_mut() {
+        *v += (rng.normal() * 0.1) as f32;
+    }
+    net.forward(&p, batch);
+    let c = rand_vec(&mut rng, net.logits().len(), 1.0);
+    let cv = rand_vec(&mut rng, net.values().len(), 1.0);
+    let mut g = vec![0.0; p.len()];
+    net.backward(&p, &mut g, batch, &c, Some(&cv));
+    let picks: Vec<usize> = (0..60.min(p.len())).map(|_| rng.index(p.len())).collect();
+    let mut num = Vec::new();
+    for &i in &picks {
+        let p0 = p[i];
+        num.push(fd(
+            |v| {
+                p[i] = v;
+                net.forward(&p, batch);
+                dot(net.logits(), &c) + dot(net.values(), &cv)
+            },
+            p0,
+            2e-3,
+        ));
+        p[i] = p0;
+    }
+    let analytic: Vec<f64> = picks.iter().map(|&i| f64::from(g[i])).collect();
+    compare(&analytic, &num, 3)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    #[test]
+    fn web_network_gradients(seed in 0u64..1000, rows in 1usize..3) {
+        let env = common::MiniWeb::new(3, 4, 3);
+        let spec = env.spec_ref().clone();
+        let layout = ObsLayout::from_spec(&spec).unwrap();
+        let opts = NetOptions { embedding_dim: 4, latent_dim: 3, ..NetOptions::default() };
+        let mut net = DiscreteNet::for_spec(&spec, &layout, &opts, true).unwrap();
+        prop_assert_eq!(net.kind(), "web");
+        let mut rng = RngStream::new(seed, "obs");
+        let mut batch = ObsBatch::new(&layout);
+        for _ in 0..rows { batch.push(&env.observation(&mut rng)).unwrap(); }
+        check_net(&mut net, &batch, seed)?;
+    }
+
+    #[test]
+    fn circuit_network_gradients(seed in 0u64..1000, rows in 1usize..3) {
+        let spec = common::mini_circuit_spec();
+        let layout = ObsLayout::from_spec(&spec).unwrap();
+        let opts = NetOptions { hidden_sizes: vec![6], latent_dim: 4, ..NetOptions::default() };
+        let mut net = DiscreteNet::for_spec(&spec, &layout, &opts, true).unwrap();
+        prop_assert_eq!(net.kind(), "circuit");
+        let mut rng = RngStream::new(seed, "obs");
+        let mut batch = ObsBatch::new(&layout);
+        for _ in 0..rows { batch.push(&common::mini_circuit_obs(&mut rng)).unwrap(); }
+        check_net(&mut net, &batch, seed)?;
+    }
+
+    #[test]
+    fn flat_network_gradients(seed in 0u64..1000, rows in 1usize..3) {
+        let spec = common::mini_circuit_spec();
+        let layout = ObsLayout::from_spec(&spec).unwrap();
+        let opts = NetOptions { architecture: "mlp".into(), hidden_sizes: vec![7, 5], ..NetOptions::default() };
+        let mut net = DiscreteNet::for_spec(&spec, &layout, &opts, true).unwrap();
+        prop_assert_eq!(net.kind(), "mlp");
+        let mut rng = RngStream::new(seed, "obs");
+        let mut batch = ObsBatch::new(&layout);
+        for _ in 0..rows { batch.push(&common::mini_circuit_obs(&mut rng)).unwrap(); }
+        check_net(&mut net, &batch, seed)?;
+    }
+}

@@ -1,0 +1,957 @@
+//! The macro-placement environment (`CircuitTraining-*`).
+//!
+//! # Episode
+//! One hard macro per step, in A2Perf's order (descending area, ties in descending node index;
+//! fixed macros excluded). The action is a placement-grid cell (`Discrete{cols·rows}`,
+//! `cell = row·cols + col`) or, with `padded_action`, A2Perf's padded 128×128 layout. The macro's
+//! centre goes to the cell centre. Reward is 0 until the last macro; then soft macros and standard
+//! cells are placed by our force-directed placer ([`crate::placer`]) and the reward is
+//! `−proxy_cost`. If a macro has no legal cell left the episode terminates with reward −1.0
+//! (A2Perf's `INFEASIBLE_REWARD`; A2Perf also auto-resets, we leave that to the caller).
+//! Info at the end: `wirelength` (the wirelength cost), `density`, `congestion`, `proxy`,
+//! `wirelength_hpwl`, `infeasible`.
+//!
+//! # Observation layout
+//! Tensors, in order (`M` = macros (hard then soft… in node-index order, as `get_macro_indices`),
+//! `G = cols·rows`, `E` = macro-adjacency edges):
+//!
+//! | name | shape | meaning |
+//! |---|---|---|
+//! | `features` | `[134]` | `[w/W, h/H, placed fraction, legal-cell fraction, area/(W·H), unplaced hard-macro area/(W·H)]` of the current macro, then an 8×8 density map (mean cell density per block), then an 8×8 congestion map (mean of (H+V)/2 per block) |
+//! | `grid` | `[4, rows, cols]` | channel 0 cell density, 1 congestion (H+V)/2, 2 legality of the current macro (0/1), 3 wirelength hint: `1 − Δ/maxΔ` where Δ is the HPWL increase of the current macro's nets if its centre were at that cell (pins at the centre; only placed/fixed pins count) |
+//! | `locations_x`, `locations_y` | `[M]` | macro centres / (W+H) (A2Perf normalisation) |
+//! | `is_node_placed` | `[M]` | 1 for placed macros (soft macros count as placed) |
+//! | `current_node` | `[1]` | position in `M` of the macro to place (0 when done) |
+//! | `node_types` | `[M]` | 1 hard, 2 soft |
+//! | `macros_w`, `macros_h` | `[M]` | size / (W+H) (0 for soft macros, as A2Perf) |
+//! | `sparse_adj_i`, `sparse_adj_j`, `sparse_adj_weight` | `[E]` | macro adjacency (positions in `M`, `i < j`), weights ÷ their mean |
+//!
+//! The mask is [`Observation::action_mask`] (`true` = legal). Unlike A2Perf, node tensors are not
+//! zero-padded to 3500 and port clusters are not included.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use a2perf_core::{
+    Action, Env, EnvEntry, EnvError, EnvSpec, Observation, ParamKind, ParamSpec, Params, Registry,
+    Space, Step, TaskRef, Tensor, Value,
+};
+
+use crate::cost::{CostSettings, CostWeights, PlacementCost};
+use crate::generator::{GeneratorConfig, generate};
+use crate::netlist::{Netlist, NodeKind, SoftMacroRule};
+use crate::placer::{FdSchedule, FdScratch, place_std_cells};
+use crate::plc::Placement;
+
+/// Reward when a macro has no legal cell left (A2Perf fork value).
+pub const INFEASIBLE_REWARD: f64 = -1.0;
+/// Side of A2Perf's padded action canvas.
+pub const PADDED_GRID: usize = 128;
+/// Side of the downsampled maps in `features`.
+pub const FEATURE_MAP: usize = 8;
+/// Length of the `features` tensor.
+pub const FEATURE_DIM: usize = 6 + 2 * FEATURE_MAP * FEATURE_MAP;
+/// Channels of the `grid` tensor.
+pub const GRID_CHANNELS: usize = 4;
+
+/// Hard macros to place, A2Perf order: descending area, ties in descending node index.
+pub fn placement_order(netlist: &Netlist, fixed: &[bool]) -> Vec<usize> {
+    let mut hard: Vec<usize> = netlist
+        .nodes
+        .iter()
+        .enumerate()
+        .filter(|(i, n)| n.kind == NodeKind::HardMacro && !fixed.get(*i).copied().unwrap_or(false))
+        .map(|(i, _)| i)
+        .collect();
+    // Python: sorted(ascending area, stable)[::-1] ⇒ equal areas end in descending index.
+    hard.sort_by(|&a, &b| {
+        let (na, nb) = (&netlist.nodes[a], &netlist.nodes[b]);
+        (na.width * na.height)
+            .total_cmp(&(nb.width * nb.height))
+            .then(a.cmp(&b))
+    });
+    hard.reverse();
+    hard
+}
+
+/// Options of a [`CircuitEnv`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct CircuitEnvConfig {
+    /// Id recorded in the spec.
+    pub id: String,
+    /// Use A2Perf's padded 128×128 action layout.
+    pub padded_action: bool,
+    /// Run the force-directed placer at the end of an episode.
+    pub std_cell_placement: bool,
+    /// The placer's schedule.
+    pub fd_schedule: FdSchedule,
+    /// Proxy weights.
+    pub weights: CostWeights,
+}
+
+impl Default for CircuitEnvConfig {
+    fn default() -> Self {
+        Self {
+            id: "CircuitTraining-Custom-v0".into(),
+            padded_action: false,
+            std_cell_placement: true,
+            fd_schedule: FdSchedule::default(),
+            weights: CostWeights::default(),
+        }
+    }
+}
+
+/// The macro-placement environment.
+///
+/// ```
+/// use a2perf_circuit::{generate, CircuitEnv, CircuitEnvConfig, GeneratorConfig};
+/// use a2perf_core::{Action, Env};
+/// let g = generate(&GeneratorConfig::small(), 0);
+/// let mut env = CircuitEnv::new(&g.netlist, Some(&g.placement), g.settings.clone(),
+///                               CircuitEnvConfig::default()).unwrap();
+/// let mut obs = env.reset(Some(0)).unwrap();
+/// loop {
+///     let mask = obs.action_mask.clone().unwrap();
+///     let Some(a) = mask.iter().position(|m| *m) else { break };
+///     let step = env.step(&Action::Discrete(a)).unwrap();
+///     obs = step.observation.clone();
+///     if step.done() { assert!(step.reward < 0.0); break; }
+/// }
+/// ```
+pub struct CircuitEnv {
+    spec: EnvSpec,
+    config: CircuitEnvConfig,
+    base_x: Vec<f64>,
+    base_y: Vec<f64>,
+    cost: PlacementCost,
+    order: Vec<usize>,
+    macros: Vec<usize>,
+    macro_pos: Vec<usize>,
+    current: usize,
+    needs_reset: bool,
+    mask: Vec<bool>,
+    fd: FdScratch,
+    static_tensors: Vec<Tensor>,
+    // Scratch.
+    dens: Vec<f64>,
+    xcost: Vec<f64>,
+    ycost: Vec<f64>,
+}
+
+fn bad_param(name: &str, reason: impl Into<String>) -> EnvError {
+    EnvError::InvalidParameter {
+        name: name.into(),
+        reason: reason.into(),
+    }
+}
+
+impl CircuitEnv {
+    /// Builds the environment for `netlist` with an optional initial placement.
+    pub fn new(
+        netlist: &Netlist,
+        init: Option<&Placement>,
+        mut settings: CostSettings,
+        config: CircuitEnvConfig,
+    ) -> Result<Self, EnvError> {
+        settings.weights = config.weights;
+        let mut cost = PlacementCost::new(netlist, settings.clone())
+            .map_err(|e| bad_param("settings", e.to_string()))?;
+        if let Some(p) = init {
+            cost.apply_placement(p)
+                .map_err(|e| bad_param("init_placement", e.to_string()))?;
+        }
+        let (cols, rows) = cost.grid();
+        if config.padded_action && (cols > PADDED_GRID || rows > PADDED_GRID) {
+            return Err(bad_param(
+                "padded_action",
+                format!("grid {cols}x{rows} exceeds {PADDED_GRID}x{PADDED_GRID}"),
+            ));
+        }
+        let fixed: Vec<bool> = (0..cost.num_nodes()).map(|i| cost.is_fixed(i)).collect();
+        let order = placement_order(netlist, &fixed);
+        if order.is_empty() {
+            return Err(EnvError::BadFile {
+                path: netlist.name.clone(),
+                reason: "the netlist has no movable hard macro".into(),
+            });
+        }
+        let macros: Vec<usize> = (0..cost.num_nodes())
+            .filter(|&i| matches!(cost.kind(i), NodeKind::HardMacro | NodeKind::SoftMacro))
+            .collect();
+        let mut macro_pos = vec![usize::MAX; cost.num_nodes()];
+        for (k, &m) in macros.iter().enumerate() {
+            macro_pos[m] = k;
+        }
+        let (cw, ch) = (settings.canvas_width, settings.canvas_height);
+        let norm = cw + ch;
+        // Static graph features.
+        let m = macros.len();
+        let node_types: Vec<f32> = macros
+            .iter()
+            .map(|&i| {
+                if cost.kind(i) == NodeKind::HardMacro {
+                    1.0
+                } else {
+                    2.0
+                }
+            })
+            .collect();
+        let (mw, mh): (Vec<f32>, Vec<f32>) = macros
+            .iter()
+            .map(|&i| {
+                if cost.kind(i) == NodeKind::HardMacro {
+                    let (w, h) = cost.size(i);
+                    ((w / norm) as f32, (h / norm) as f32)
+                } else {
+                    (0.0, 0.0)
+                }
+            })
+            .unzip();
+        let mut adj: BTreeMap<(usize, usize), f64> = BTreeMap::new();
+        let owner = |p: usize| -> Option<usize> {
+            let n = &netlist.nodes[p];
+            let o = if n.kind.is_pin() { n.macro_index? } else { p };
+            (macro_pos[o] != usize::MAX).then_some(macro_pos[o])
+        };
+        for net in &netlist.nets {
+            let Some(d) = owner(net.driver) else { continue };
+            for &s in &net.sinks {
+                if let Some(t) = owner(s)
+                    && t != d
+                {
+                    *adj.entry((d.min(t), d.max(t))).or_insert(0.0) += net.weight;
+                }
+            }
+        }
+        let mean = if adj.is_empty() {
+            1.0
+        } else {
+            adj.values().sum::<f64>() / adj.len() as f64
+        };
+        let e = adj.len();
+        let static_tensors = vec![
+            Tensor {
+                name: "node_types".into(),
+                shape: vec![m],
+                data: node_types,
+            },
+            Tensor {
+                name: "macros_w".into(),
+                shape: vec![m],
+                data: mw,
+            },
+            Tensor {
+                name: "macros_h".into(),
+                shape: vec![m],
+                data: mh,
+            },
+            Tensor {
+                name: "sparse_adj_i".into(),
+                shape: vec![e],
+                data: adj.keys().map(|k| k.0 as f32).collect(),
+            },
+            Tensor {
+                name: "sparse_adj_j".into(),
+                shape: vec![e],
+                data: adj.keys().map(|k| k.1 as f32).collect(),
+            },
+            Tensor {
+                name: "sparse_adj_weight".into(),
+                shape: vec![e],
+                data: adj.values().map(|w| (w / mean) as f32).collect(),
+            },
+        ];
+        let n_actions = if config.padded_action {
+            PADDED_GRID * PADDED_GRID
+        } else {
+            cols * rows
+        };
+        let mut dict = vec![
+            (
+                "features".to_string(),
+                Space::uniform_box(&[FEATURE_DIM], 0.0, f32::INFINITY),
+            ),
+            (
+                "grid".to_string(),
+                Space::uniform_box(&[GRID_CHANNELS, rows, cols], 0.0, f32::INFINITY),
+            ),
+            (
+                "locations_x".to_string(),
+                Space::uniform_box(&[m], 0.0, 1.0),
+            ),
+            (
+                "locations_y".to_string(),
+                Space::uniform_box(&[m], 0.0, 1.0),
+            ),
+            (
+                "is_node_placed".to_string(),
+                Space::uniform_box(&[m], 0.0, 1.0),
+            ),
+            (
+                "current_node".to_string(),
+                Space::uniform_box(&[1], 0.0, m as f32),
+            ),
+        ];
+        for t in &static_tensors {
+            dict.push((
+                t.name.clone(),
+                Space::uniform_box(&t.shape, 0.0, f32::INFINITY),
+            ));
+        }
+        let mut metadata = BTreeMap::new();
+        metadata.insert("netlist".into(), netlist.name.clone());
+        metadata.insert("netlist_hash".into(), netlist.content_hash.clone());
+        metadata.insert("grid".into(), format!("{cols}x{rows}"));
+        metadata.insert("canvas".into(), format!("{cw}x{ch}"));
+        metadata.insert("hard_macros".into(), order.len().to_string());
+        metadata.insert(
+            "cost_settings".into(),
+            serde_json::to_string(&settings).unwrap_or_default(),
+        );
+        metadata.insert(
+            "std_cell_placer".into(),
+            if config.std_cell_placement {
+                "a2perf-circuit force-directed (ours), CT schedule".into()
+            } else {
+                "none".into()
+            },
+        );
+        metadata.insert(
+            "action_layout".into(),
+            if config.padded_action {
+                "padded128".into()
+            } else {
+                "grid".into()
+            },
+        );
+        let spec = EnvSpec {
+            id: config.id.clone(),
+            observation_space: Space::Dict(dict),
+            action_space: Space::Discrete { n: n_actions },
+            max_episode_steps: Some(order.len()),
+            metadata,
+        };
+        let n = cost.num_nodes();
+        let base_x = (0..n).map(|i| cost.position(i).0).collect();
+        let base_y = (0..n).map(|i| cost.position(i).1).collect();
+        Ok(Self {
+            spec,
+            config,
+            base_x,
+            base_y,
+            mask: vec![false; cols * rows],
+            cost,
+            order,
+            macros,
+            macro_pos,
+            current: 0,
+            needs_reset: true,
+            fd: FdScratch::default(),
+            static_tensors,
+            dens: Vec::new(),
+            xcost: vec![0.0; cols],
+            ycost: vec![0.0; rows],
+        })
+    }
+
+    /// The cost model (current placement).
+    pub fn cost(&self) -> &PlacementCost {
+        &self.cost
+    }
+
+    /// Mutable cost model (e.g. to query congestion maps).
+    pub fn cost_mut(&mut self) -> &mut PlacementCost {
+        &mut self.cost
+    }
+
+    /// Hard macros in placement order.
+    pub fn order(&self) -> &[usize] {
+        &self.order
+    }
+
+    /// Converts an action to a placement-grid cell (None when it falls in the padding).
+    pub fn action_to_cell(&self, a: usize) -> Option<usize> {
+        let (cols, rows) = self.cost.grid();
+        if !self.config.padded_action {
+            return (a < cols * rows).then_some(a);
+        }
+        let up = (PADDED_GRID - rows) / 2;
+        let right = (PADDED_GRID - cols) / 2;
+        let (r, c) = (a / PADDED_GRID, a % PADDED_GRID);
+        if r < up
+            || c < right
+            || r - up >= rows
+            || c - right >= cols
+            || a >= PADDED_GRID * PADDED_GRID
+        {
+            return None;
+        }
+        Some((r - up) * cols + (c - right))
+    }
+
+    /// Converts a placement-grid cell to an action.
+    pub fn cell_to_action(&self, cell: usize) -> usize {
+        let (cols, rows) = self.cost.grid();
+        if !self.config.padded_action {
+            return cell;
+        }
+        let up = (PADDED_GRID - rows) / 2;
+        let right = (PADDED_GRID - cols) / 2;
+        (cell / cols + up) * PADDED_GRID + (cell % cols + right)
+    }
+
+    fn write_obs(&mut self, obs: &mut Observation) {
+        let (cols, rows) = self.cost.grid();
+        let g = cols * rows;
+        let done = self.current >= self.order.len();
+        // Mask.
+        if done {
+            self.mask.iter_mut().for_each(|m| *m = false);
+        } else {
+            let node = self.order[self.current];
+            self.cost.node_mask(node, &mut self.mask);
+        }
+        let n_actions = match self.spec.action_space {
+            Space::Discrete { n } => n,
+            _ => g,
+        };
+        let am = obs.action_mask.get_or_insert_with(Vec::new);
+        am.clear();
+        am.resize(n_actions, false);
+        for (cell, &legal) in self.mask.iter().enumerate() {
+            if legal {
+                let a = if self.config.padded_action {
+                    let up = (PADDED_GRID - rows) / 2;
+                    let right = (PADDED_GRID - cols) / 2;
+                    (cell / cols + up) * PADDED_GRID + (cell % cols + right)
+                } else {
+                    cell
+                };
+                am[a] = true;
+            }
+        }
+        let legal_count = self.mask.iter().filter(|m| **m).count();
+        // Tensor slots.
+        let m = self.macros.len();
+        let names_shapes: [(&str, usize); 6] = [
+            ("features", FEATURE_DIM),
+            ("grid", GRID_CHANNELS * g),
+            ("locations_x", m),
+            ("locations_y", m),
+            ("is_node_placed", m),
+            ("current_node", 1),
+        ];
+        let total = names_shapes.len() + self.static_tensors.len();
+        obs.tensors.truncate(total);
+        for (k, (name, len)) in names_shapes.iter().enumerate() {
+            let shape: &[usize] = if *name == "grid" {
+                &[GRID_CHANNELS, rows, cols]
+            } else {
+                &[*len]
+            };
+            if let Some(t) = obs.tensors.get_mut(k) {
+                if t.name != *name {
+                    t.name = name.to_string();
+                }
+                if t.shape != shape {
+                    t.shape = shape.to_vec();
+                }
+                t.data.clear();
+                t.data.resize(*len, 0.0);
+            } else {
+                obs.tensors.push(Tensor::zeros(name, shape));
+            }
+        }
+        for (k, st) in self.static_tensors.iter().enumerate() {
+            let idx = names_shapes.len() + k;
+            if let Some(t) = obs.tensors.get_mut(idx) {
+                if t.name != st.name || t.shape != st.shape || t.data != st.data {
+                    t.clone_from(st);
+                }
+            } else {
+                obs.tensors.push(st.clone());
+            }
+        }
+        // Density and congestion per cell (congestion on the congestion grid mapped by centre).
+        self.cost.density_cells(&mut self.dens);
+        let (ccols, crows) = self.cost.congestion_grid();
+        let (cw, ch) = {
+            let s = self.cost.settings();
+            (s.canvas_width, s.canvas_height)
+        };
+        let (hmap, vmap) = self.cost.congestion_maps();
+        let grid_t = &mut obs.tensors[1].data;
+        for cell in 0..g {
+            let (r, c) = (cell / cols, cell % cols);
+            let cr = (r * crows / rows).min(crows - 1);
+            let cc = (c * ccols / cols).min(ccols - 1);
+            let ci = cr * ccols + cc;
+            grid_t[cell] = self.dens[cell] as f32;
+            grid_t[g + cell] = ((hmap[ci] + vmap[ci]) / 2.0) as f32;
+            grid_t[2 * g + cell] = if self.mask[cell] { 1.0 } else { 0.0 };
+        }
+        // Wirelength hint.
+        if !done {
+            self.wl_hint(self.order[self.current], cw, ch);
+            let grid_t = &mut obs.tensors[1].data;
+            let mut max = 0.0f64;
+            for r in 0..rows {
+                for c in 0..cols {
+                    max = max.max(self.xcost[c] + self.ycost[r]);
+                }
+            }
+            for r in 0..rows {
+                for c in 0..cols {
+                    let v = self.xcost[c] + self.ycost[r];
+                    grid_t[3 * g + r * cols + c] = if max > 0.0 {
+                        (1.0 - v / max) as f32
+                    } else {
+                        1.0
+                    };
+                }
+            }
+        }
+        // Features.
+        let feat = &mut obs.tensors[0].data;
+        let placed = self.current.min(self.order.len());
+        if !done {
+            let (w, h) = self.cost.size(self.order[self.current]);
+            feat[0] = (w / cw) as f32;
+            feat[1] = (h / ch) as f32;
+            feat[4] = (w * h / (cw * ch)) as f32;
+        }
+        feat[2] = placed as f32 / self.order.len() as f32;
+        feat[3] = legal_count as f32 / g as f32;
+        let remaining: f64 = self.order[placed..]
+            .iter()
+            .map(|&i| {
+                let (w, h) = self.cost.size(i);
+                w * h
+            })
+            .sum();
+        feat[5] = (remaining / (cw * ch)) as f32;
+        let fm = FEATURE_MAP;
+        let mut counts = [0u32; FEATURE_MAP * FEATURE_MAP];
+        for cell in 0..g {
+            let (r, c) = (cell / cols, cell % cols);
+            let b = (r * fm / rows) * fm + c * fm / cols;
+            counts[b] += 1;
+        }
+        let grid_ref = &obs.tensors[1].data;
+        let mut dmap = [0f32; FEATURE_MAP * FEATURE_MAP];
+        let mut cmap = [0f32; FEATURE_MAP * FEATURE_MAP];
+        for cell in 0..g {
+            let (r, c) = (cell / cols, cell % cols);
+            let b = (r * fm / rows) * fm + c * fm / cols;
+            dmap[b] += grid_ref[cell];
+            cmap[b] += grid_ref[g + cell];
+        }
+        let feat = &mut obs.tensors[0].data;
+        for b in 0..fm * fm {
+            let n = counts[b].max(1) as f32;
+            feat[6 + b] = dmap[b] / n;
+            feat[6 + fm * fm + b] = cmap[b] / n;
+        }
+        // Dynamic A2Perf features.
+        let norm = cw + ch;
+        for (k, &i) in self.macros.iter().enumerate() {
+            let (x, y) = self.cost.position(i);
+            let placed = self.cost.kind(i) == NodeKind::SoftMacro || self.cost.is_placed(i);
+            obs.tensors[2].data[k] = (x / norm) as f32;
+            obs.tensors[3].data[k] = (y / norm) as f32;
+            obs.tensors[4].data[k] = if placed { 1.0 } else { 0.0 };
+        }
+        obs.tensors[5].data[0] = if done {
+            0.0
+        } else {
+            self.macro_pos[self.order[self.current]] as f32
+        };
+    }
+
+    /// Per-column / per-row HPWL increase of node's nets if its centre moved there.
+    fn wl_hint(&mut self, node: usize, cw: f64, ch: f64) {
+        let (cols, rows) = self.cost.grid();
+        self.xcost.iter_mut().for_each(|v| *v = 0.0);
+        self.ycost.iter_mut().for_each(|v| *v = 0.0);
+        let c = &self.cost;
+        let (gw, gh) = (cw / cols as f64, ch / rows as f64);
+        for k in c.node_net_start[node] as usize..c.node_net_start[node + 1] as usize {
+            let net = c.node_nets[k] as usize;
+            let (mut x0, mut x1, mut y0, mut y1) = (
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+            );
+            for p in c.net_start[net] as usize..c.net_start[net + 1] as usize {
+                let o = c.pin_owner[p] as usize;
+                if o == node || (c.kind[o] == NodeKind::HardMacro && !c.placed[o]) {
+                    continue;
+                }
+                x0 = x0.min(c.pin_x[p]);
+                x1 = x1.max(c.pin_x[p]);
+                y0 = y0.min(c.pin_y[p]);
+                y1 = y1.max(c.pin_y[p]);
+            }
+            if !x0.is_finite() {
+                continue;
+            }
+            let w = c.net_w[net];
+            for col in 0..cols {
+                let x = (col as f64 + 0.5) * gw;
+                self.xcost[col] += w * (x0 - x).max(x - x1).max(0.0);
+            }
+            for row in 0..rows {
+                let y = (row as f64 + 0.5) * gh;
+                self.ycost[row] += w * (y0 - y).max(y - y1).max(0.0);
+            }
+        }
+    }
+}
+
+impl Env for CircuitEnv {
+    fn spec(&self) -> &EnvSpec {
+        &self.spec
+    }
+
+    fn reset_into(&mut self, _seed: Option<u64>, obs: &mut Observation) -> Result<(), EnvError> {
+        // Deterministic: the episode does not depend on the seed (the node order is fixed).
+        self.cost.x.copy_from_slice(&self.base_x);
+        self.cost.y.copy_from_slice(&self.base_y);
+        for &i in &self.order {
+            self.cost.placed[i] = false;
+        }
+        self.cost.recompute();
+        self.current = 0;
+        self.needs_reset = false;
+        self.write_obs(obs);
+        Ok(())
+    }
+
+    fn step_into(&mut self, action: &Action, out: &mut Step) -> Result<(), EnvError> {
+        if self.needs_reset || self.current >= self.order.len() {
+            return Err(EnvError::NeedsReset);
+        }
+        let Action::Discrete(a) = *action else {
+            return Err(EnvError::InvalidAction {
+                action: action.clone(),
+                reason: "expected a discrete action".into(),
+            });
+        };
+        let Some(cell) = self.action_to_cell(a) else {
+            return Err(EnvError::InvalidAction {
+                action: action.clone(),
+                reason: "outside the placement grid".into(),
+            });
+        };
+        if !self.mask[cell] {
+            return Err(EnvError::InvalidAction {
+                action: action.clone(),
+                reason: "cell is masked (overlap or outside the canvas)".into(),
+            });
+        }
+        let node = self.order[self.current];
+        self.cost.place_at_cell(node, cell);
+        self.current += 1;
+        out.info.clear();
+        out.truncated = false;
+        if self.current == self.order.len() {
+            if self.config.std_cell_placement {
+                place_std_cells(&mut self.cost, &self.config.fd_schedule, &mut self.fd);
+            }
+            let c = self.cost.costs();
+            out.reward = -c.proxy_cost;
+            out.terminated = true;
+            self.needs_reset = true;
+            out.info.set("wirelength", c.wirelength_cost);
+            out.info.set("density", c.density_cost);
+            out.info.set("congestion", c.congestion_cost);
+            out.info.set("proxy", c.proxy_cost);
+            out.info.set("wirelength_hpwl", c.wirelength);
+            out.info.set("infeasible", 0.0);
+            self.write_obs(&mut out.observation);
+            return Ok(());
+        }
+        self.write_obs(&mut out.observation);
+        if self.mask.iter().any(|m| *m) {
+            out.reward = -0.0;
+            out.terminated = false;
+        } else {
+            out.reward = INFEASIBLE_REWARD;
+            out.terminated = true;
+            self.needs_reset = true;
+            out.info.set("infeasible", 1.0);
+            out.info.set("wirelength", -1.0);
+            out.info.set("density", -1.0);
+            out.info.set("congestion", -1.0);
+        }
+        Ok(())
+    }
+}
+
+fn common_params() -> Vec<ParamSpec> {
+    vec![
+        ParamSpec::new(
+            "padded_action",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "A2Perf's padded 128x128 action layout",
+        ),
+        ParamSpec::new(
+            "std_cell_placer",
+            ParamKind::Choice(&["fd", "none"]),
+            Value::Str("fd".into()),
+            "standard-cell placement at episode end (fd = our force-directed placer)",
+        ),
+        ParamSpec::new(
+            "wirelength_weight",
+            ParamKind::Float,
+            Value::Float(1.0),
+            "proxy weight of the wirelength cost",
+        ),
+        ParamSpec::new(
+            "density_weight",
+            ParamKind::Float,
+            Value::Float(1.0),
+            "proxy weight of the density cost",
+        ),
+        ParamSpec::new(
+            "congestion_weight",
+            ParamKind::Float,
+            Value::Float(0.5),
+            "proxy weight of the congestion cost",
+        ),
+        ParamSpec::new(
+            "smooth_range",
+            ParamKind::Float,
+            Value::Null,
+            "congestion smoothing range (default 5, CT)",
+        ),
+        ParamSpec::new(
+            "grid_cols",
+            ParamKind::Int,
+            Value::Null,
+            "override placement grid columns",
+        ),
+        ParamSpec::new(
+            "grid_rows",
+            ParamKind::Int,
+            Value::Null,
+            "override placement grid rows",
+        ),
+        ParamSpec::new(
+            "congestion_grid",
+            ParamKind::Choice(&["legacy", "ct"]),
+            Value::Str("legacy".into()),
+            "legacy = placement grid (verified); ct = CT's separate grid (semantics assumed)",
+        ),
+    ]
+}
+
+fn config_from(
+    id: &str,
+    p: &Params,
+    settings: &mut CostSettings,
+) -> Result<CircuitEnvConfig, EnvError> {
+    let perr = |e: a2perf_core::ParamError| bad_param("params", e.to_string());
+    let weights = CostWeights {
+        wirelength: p.f64("wirelength_weight").map_err(perr)?,
+        density: p.f64("density_weight").map_err(perr)?,
+        congestion: p.f64("congestion_weight").map_err(perr)?,
+    };
+    if let Some(v) = p.get("smooth_range") {
+        settings.smooth_range = v
+            .as_f64()
+            .ok_or_else(|| bad_param("smooth_range", "expected a number"))?;
+    }
+    for (key, slot) in [
+        ("grid_cols", &mut settings.grid_cols),
+        ("grid_rows", &mut settings.grid_rows),
+    ] {
+        if p.get(key).is_some() {
+            let v = p.usize(key).map_err(perr)?;
+            if v == 0 || v > PADDED_GRID {
+                return Err(bad_param(key, format!("must be in 1..={PADDED_GRID}")));
+            }
+            *slot = v;
+        }
+    }
+    if p.str("congestion_grid").map_err(perr)? == "ct" {
+        settings.congestion_grid = Some(settings.ct_congestion_grid());
+    }
+    Ok(CircuitEnvConfig {
+        id: id.to_string(),
+        padded_action: p.bool("padded_action").map_err(perr)?,
+        std_cell_placement: p.str("std_cell_placer").map_err(perr)? == "fd",
+        fd_schedule: FdSchedule::default(),
+        weights,
+    })
+}
+
+fn file_env(id: &str, p: &Params) -> Result<Box<dyn Env>, EnvError> {
+    let path = p
+        .opt_str("netlist_file")
+        .map_err(|e| bad_param("netlist_file", e.to_string()))?;
+    let Some(path) = path else {
+        return Err(bad_param(
+            "netlist_file",
+            "required: path to a circuit_training netlist.pb.txt (e.g. test_data/toy_macro_stdcell/netlist.pb.txt)",
+        ));
+    };
+    let netlist =
+        Netlist::from_file(path, SoftMacroRule::default()).map_err(|e| EnvError::BadFile {
+            path: path.to_string(),
+            reason: e.to_string(),
+        })?;
+    let init = match p
+        .opt_str("init_placement")
+        .map_err(|e| bad_param("init_placement", e.to_string()))?
+    {
+        Some(f) => Some(Placement::from_file(f).map_err(|e| EnvError::BadFile {
+            path: f.to_string(),
+            reason: e.to_string(),
+        })?),
+        None => {
+            // CT convention: initial.plc next to the netlist.
+            let guess = Path::new(path).with_file_name("initial.plc");
+            if guess.exists() {
+                Some(Placement::from_file(&guess).map_err(|e| EnvError::BadFile {
+                    path: guess.display().to_string(),
+                    reason: e.to_string(),
+                })?)
+            } else {
+                None
+            }
+        }
+    };
+    let mut settings = CostSettings::ct_env(&netlist, init.as_ref().map(|p| &p.header));
+    let config = config_from(id, p, &mut settings)?;
+    Ok(Box::new(CircuitEnv::new(
+        &netlist,
+        init.as_ref(),
+        settings,
+        config,
+    )?))
+}
+
+fn synthetic_env(
+    id: &str,
+    generator: &GeneratorConfig,
+    p: &Params,
+) -> Result<Box<dyn Env>, EnvError> {
+    let seed = p
+        .u64("netlist_seed")
+        .map_err(|e| bad_param("netlist_seed", e.to_string()))?;
+    let g = generate(generator, seed);
+    let mut settings = g.settings.clone();
+    let config = config_from(id, p, &mut settings)?;
+    let mut env = CircuitEnv::new(&g.netlist, Some(&g.placement), settings, config)?;
+    env.spec
+        .metadata
+        .insert("netlist_seed".into(), seed.to_string());
+    env.spec.metadata.insert(
+        "generator".into(),
+        serde_json::to_string(generator).unwrap_or_default(),
+    );
+    Ok(Box::new(env))
+}
+
+/// Registers the `CircuitTraining-*` environments and the circuit generalization suite.
+///
+/// ```
+/// let mut reg = a2perf_core::Registry::new();
+/// a2perf_circuit::register(&mut reg);
+/// let mut env = reg.make_env("CircuitTraining-Synthetic-Small-v0", &Default::default()).unwrap();
+/// let obs = env.reset(Some(0)).unwrap();
+/// assert!(obs.tensor("features").is_some());
+/// assert!(!reg.generalization("circuit_training").is_empty());
+/// ```
+pub fn register(reg: &mut Registry) {
+    for (id, summary) in [
+        (
+            "CircuitTraining-ToyMacro-v0",
+            "CT toy macro/stdcell netlist (needs netlist_file)",
+        ),
+        (
+            "CircuitTraining-Ariane-v0",
+            "CT Ariane RISC-V, 133 hard macros (needs netlist_file)",
+        ),
+    ] {
+        let mut params = vec![
+            ParamSpec::new(
+                "netlist_file",
+                ParamKind::Path,
+                Value::Null,
+                "circuit_training netlist.pb.txt (plain or .gz)",
+            ),
+            ParamSpec::new(
+                "init_placement",
+                ParamKind::Path,
+                Value::Null,
+                "initial .plc (default: initial.plc next to the netlist)",
+            ),
+        ];
+        params.extend(common_params());
+        let idc = id.to_string();
+        reg.register_env(EnvEntry {
+            id: id.into(),
+            domain: "circuit_training".into(),
+            summary: summary.into(),
+            params,
+            make: Arc::new(move |p: &Params| file_env(&idc, p)),
+        });
+    }
+    for (id, summary, generator) in [
+        (
+            "CircuitTraining-Synthetic-Small-v0",
+            "generated circuit, 12 hard macros, 16x16 grid (no files)",
+            GeneratorConfig::small(),
+        ),
+        (
+            "CircuitTraining-Synthetic-Medium-v0",
+            "generated circuit, 32 hard macros, 24x20 grid (no files)",
+            GeneratorConfig::medium(),
+        ),
+        (
+            "CircuitTraining-Synthetic-Ariane-v0",
+            "generated Ariane-scale circuit, 133 hard macros, 35x33 grid (no files)",
+            GeneratorConfig::ariane_scale(),
+        ),
+    ] {
+        let mut params = vec![ParamSpec::new(
+            "netlist_seed",
+            ParamKind::Int,
+            Value::Int(0),
+            "seed of the generated netlist",
+        )];
+        params.extend(common_params());
+        let idc = id.to_string();
+        reg.register_env(EnvEntry {
+            id: id.into(),
+            domain: "circuit_training".into(),
+            summary: summary.into(),
+            params,
+            make: Arc::new(move |p: &Params| synthetic_env(&idc, &generator, p)),
+        });
+    }
+    let task = |name: &str, id: &str, seed: i64| {
+        let mut params = BTreeMap::new();
+        params.insert("netlist_seed".to_string(), Value::Int(seed));
+        TaskRef {
+            name: name.into(),
+            env_id: id.into(),
+            params,
+        }
+    };
+    reg.register_generalization(
+        "circuit_training",
+        vec![
+            task("small_seed1", "CircuitTraining-Synthetic-Small-v0", 1),
+            task("small_seed2", "CircuitTraining-Synthetic-Small-v0", 2),
+            task("small_seed3", "CircuitTraining-Synthetic-Small-v0", 3),
+            task("medium_seed1", "CircuitTraining-Synthetic-Medium-v0", 1),
+            task("medium_seed2", "CircuitTraining-Synthetic-Medium-v0", 2),
+        ],
+    );
+}

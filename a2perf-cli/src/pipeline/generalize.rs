@@ -1,0 +1,115 @@
+//! `a2perf generalize`: greedy returns of a trained policy on every task of its domain's
+//! generalization suite, and their sum.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use a2perf_core::{ActMode, Registry, RngStream, Value, rollout, write_json_atomic};
+use serde::{Deserialize, Serialize};
+
+use super::{GENERALIZATION_FILE, LoadedRun, PipelineError, Result, progress};
+
+/// Result on one task of the suite.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TaskResult {
+    /// Task name.
+    pub name: String,
+    /// Environment id.
+    pub env_id: String,
+    /// Parameters that differ from the id's defaults.
+    pub params: BTreeMap<String, Value>,
+    /// Return of every rollout.
+    pub returns: Vec<f64>,
+    /// Mean return (`None` when the task could not be run; see `error`).
+    pub mean_return: Option<f64>,
+    /// Why the policy could not be run on this task (e.g. its observation does not fit).
+    pub error: Option<String>,
+}
+
+/// `generalization.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GeneralizationResults {
+    /// Domain of the suite.
+    pub domain: String,
+    /// Rollouts per task.
+    pub episodes: usize,
+    /// Per-task results, in suite order.
+    pub tasks: Vec<TaskResult>,
+    /// Sum of the per-task mean returns (the paper's generalization score); `None` if any task
+    /// could not be run.
+    pub sum_of_mean_returns: Option<f64>,
+}
+
+/// Rolls the final policy of a complete run out on every generalization task of its domain and
+/// writes `generalization.json`.
+pub fn generalize_run(
+    registry: &Registry,
+    dir: &Path,
+    episodes: Option<usize>,
+    show_progress: bool,
+) -> Result<GeneralizationResults> {
+    let run = LoadedRun::open(dir)?;
+    run.require_complete()?;
+    let episodes = episodes.unwrap_or(run.record.generalization.episodes);
+    if episodes == 0 {
+        return Err(PipelineError::Invalid(
+            "generalization needs at least one episode per task".into(),
+        ));
+    }
+    let suite = registry.generalization(&run.record.domain).to_vec();
+    if suite.is_empty() {
+        return Err(PipelineError::Invalid(format!(
+            "domain `{}` has no generalization suite registered",
+            run.record.domain
+        )));
+    }
+    let bar = progress::bar((suite.len() * episodes) as u64, "generalize", show_progress);
+    let mut tasks = Vec::with_capacity(suite.len());
+    for task in &suite {
+        let mut result = TaskResult {
+            name: task.name.clone(),
+            env_id: task.env_id.clone(),
+            params: task.params.clone(),
+            returns: Vec::new(),
+            mean_return: None,
+            error: None,
+        };
+        let outcome = (|| -> Result<Vec<f64>> {
+            let mut env = registry.make_env(&task.env_id, &task.params)?;
+            let spec = env.spec().clone();
+            let mut policy = run.load_policy(registry, &spec)?;
+            let seeds = RngStream::new(run.record.seed, &format!("generalization/{}", task.name));
+            let mut returns = Vec::with_capacity(episodes);
+            for i in 0..episodes {
+                let seed = seeds.derive_index(i as u64).next_u64();
+                let ep = rollout(env.as_mut(), policy.as_mut(), seed, ActMode::Greedy, false)
+                    .map_err(|source| PipelineError::Run {
+                        run: format!("{} on {}", dir.display(), task.name),
+                        source,
+                    })?;
+                returns.push(ep.episode_return);
+                bar.inc(1);
+            }
+            let _ = env.close();
+            Ok(returns)
+        })();
+        match outcome {
+            Ok(returns) => {
+                result.mean_return = Some(returns.iter().sum::<f64>() / returns.len() as f64);
+                result.returns = returns;
+            }
+            Err(e) => result.error = Some(e.to_string()),
+        }
+        tasks.push(result);
+    }
+    bar.finish_and_clear();
+    let sum = tasks.iter().map(|t| t.mean_return).sum::<Option<f64>>();
+    let results = GeneralizationResults {
+        domain: run.record.domain.clone(),
+        episodes,
+        tasks,
+        sum_of_mean_returns: sum,
+    };
+    write_json_atomic(&dir.join(GENERALIZATION_FILE), &results)?;
+    Ok(results)
+}

@@ -1,0 +1,227 @@
+//! `a2perf infer`: rollouts of the final policy, per-call inference time, and system meters.
+
+use std::path::Path;
+use std::time::Instant;
+
+use a2perf_core::{
+    ActMode, Env, Observation, Policy, Registry, RngStream, Space, Step, Tensor, write_json_atomic,
+};
+use serde::{Deserialize, Serialize};
+
+use super::plan::ObservationSource;
+use super::stats::Summary;
+use super::train::{MeterFactory, Phase, PhaseSystem, measured, no_meters};
+use super::{INFERENCE_FILE, LoadedRun, PipelineError, Result, progress};
+
+/// Options of [`infer_run`]; `None` fields take the run's recorded settings.
+#[derive(Clone)]
+pub struct InferOptions {
+    /// Greedy rollouts.
+    pub episodes: Option<usize>,
+    /// Which observations the reported time is measured on.
+    pub observation_source: Option<ObservationSource>,
+    /// Calls timed on random observations (with `ObservationSource::Random`).
+    pub timing_samples: Option<usize>,
+    /// System meters for the rollout phase.
+    pub meters: MeterFactory,
+    /// Show a progress bar.
+    pub show_progress: bool,
+}
+
+impl Default for InferOptions {
+    fn default() -> Self {
+        Self {
+            episodes: None,
+            observation_source: None,
+            timing_samples: None,
+            meters: no_meters(),
+            show_progress: false,
+        }
+    }
+}
+
+/// `inference.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InferenceResults {
+    /// Greedy rollouts run.
+    pub episodes: usize,
+    /// Return of every rollout (undiscounted sum of rewards).
+    pub rollout_returns: Vec<f64>,
+    /// Summary of `rollout_returns`.
+    pub returns: Summary,
+    /// Length of every rollout.
+    pub episode_lengths: Vec<usize>,
+    /// Per-call inference time in milliseconds on the configured observations (the figure the
+    /// report uses).
+    pub inference_time_ms: Summary,
+    /// Which observations `inference_time_ms` was measured on.
+    pub observation_source: ObservationSource,
+    /// Time of every `Policy::act` call made during the rollouts, in milliseconds.
+    pub rollout_call_time_ms: Summary,
+    /// Time of each call on random observation-space samples (the original harness's method),
+    /// in milliseconds, when requested.
+    pub random_observation_time_ms: Option<Summary>,
+    /// Random samples on which the policy returned an error (e.g. no legal action).
+    pub random_observation_failures: usize,
+    /// RAM, power and energy over the rollouts.
+    pub system: PhaseSystem,
+}
+
+/// Draws an observation from `space` (uniform within finite bounds, standard normal otherwise).
+/// Discrete action spaces get an all-legal mask of `action_n` entries.
+pub fn random_observation(
+    space: &Space,
+    action_n: Option<usize>,
+    rng: &mut RngStream,
+) -> Observation {
+    fn fill(name: &str, space: &Space, rng: &mut RngStream, out: &mut Vec<Tensor>) {
+        match space {
+            Space::Box { low, high, shape } => out.push(Tensor {
+                name: name.into(),
+                shape: shape.clone(),
+                data: low
+                    .iter()
+                    .zip(high)
+                    .map(|(&l, &h)| {
+                        if l.is_finite() && h.is_finite() {
+                            rng.range(f64::from(l), f64::from(h)) as f32
+                        } else {
+                            rng.normal() as f32
+                        }
+                    })
+                    .collect(),
+            }),
+            Space::Discrete { n } => out.push(Tensor {
+                name: name.into(),
+                shape: vec![1],
+                data: vec![rng.index((*n).max(1)) as f32],
+            }),
+            Space::Dict(items) => {
+                for (k, s) in items {
+                    fill(k, s, rng, out);
+                }
+            }
+        }
+    }
+    let mut tensors = Vec::new();
+    fill("obs", space, rng, &mut tensors);
+    Observation {
+        tensors,
+        action_mask: action_n.map(|n| vec![true; n]),
+    }
+}
+
+/// Runs the inference benchmark on a complete run directory and writes `inference.json`.
+pub fn infer_run(registry: &Registry, dir: &Path, opts: &InferOptions) -> Result<InferenceResults> {
+    let run = LoadedRun::open(dir)?;
+    run.require_complete()?;
+    let episodes = opts.episodes.unwrap_or(run.record.inference.episodes);
+    if episodes == 0 {
+        return Err(PipelineError::Invalid(
+            "inference needs at least one episode".into(),
+        ));
+    }
+    let source = opts
+        .observation_source
+        .unwrap_or(run.record.inference.observation_source);
+    let random_n = match source {
+        ObservationSource::Random => opts
+            .timing_samples
+            .unwrap_or(run.record.inference.timing_samples)
+            .max(1),
+        ObservationSource::Rollouts => 0,
+    };
+    let mut env = run.make_env(registry)?;
+    let spec = env.spec().clone();
+    let mut policy = run.load_policy(registry, &spec)?;
+    let run_err = |source: a2perf_core::RunError| PipelineError::Run {
+        run: dir.display().to_string(),
+        source,
+    };
+
+    let seeds = RngStream::new(run.record.seed, "inference/episodes");
+    let bar = progress::bar(episodes as u64, "infer", opts.show_progress);
+    let meters = (opts.meters)(Phase::Inference, dir, &run.record.metrics);
+    let (rollouts, system) = measured(meters, || -> Result<(Vec<f64>, Vec<usize>, Vec<f64>)> {
+        let mut returns = Vec::with_capacity(episodes);
+        let mut lengths = Vec::with_capacity(episodes);
+        let mut times_ms = Vec::new();
+        for i in 0..episodes {
+            let seed = seeds.derive_index(i as u64).next_u64();
+            let (ret, len) = timed_rollout(env.as_mut(), policy.as_mut(), seed, &mut times_ms)
+                .map_err(run_err)?;
+            returns.push(ret);
+            lengths.push(len);
+            bar.inc(1);
+        }
+        Ok((returns, lengths, times_ms))
+    });
+    bar.finish_and_clear();
+    let (returns, lengths, times_ms) = rollouts?;
+    let _ = env.close();
+
+    let mut random_failures = 0;
+    let random_time = (random_n > 0).then(|| {
+        let action_n = match spec.action_space {
+            Space::Discrete { n } => Some(n),
+            _ => None,
+        };
+        let mut rng = RngStream::new(run.record.seed, "inference/random-observations");
+        // Sampled before timing, as the original did, so only the call itself is measured.
+        let samples: Vec<Observation> = (0..random_n)
+            .map(|_| random_observation(&spec.observation_space, action_n, &mut rng))
+            .collect();
+        let mut times = Vec::with_capacity(random_n);
+        for obs in &samples {
+            let t = Instant::now();
+            let r = policy.act(obs, ActMode::Greedy);
+            let dt = t.elapsed().as_secs_f64() * 1e3;
+            match r {
+                Ok(_) => times.push(dt),
+                Err(_) => random_failures += 1,
+            }
+        }
+        Summary::of(&times)
+    });
+
+    let rollout_time = Summary::of(&times_ms);
+    let results = InferenceResults {
+        episodes,
+        returns: Summary::of(&returns),
+        rollout_returns: returns,
+        episode_lengths: lengths,
+        inference_time_ms: random_time.clone().unwrap_or_else(|| rollout_time.clone()),
+        observation_source: source,
+        rollout_call_time_ms: rollout_time,
+        random_observation_time_ms: random_time,
+        random_observation_failures: random_failures,
+        system,
+    };
+    write_json_atomic(&dir.join(INFERENCE_FILE), &results)?;
+    Ok(results)
+}
+
+/// One greedy episode, timing every `act` call (milliseconds appended to `times_ms`).
+fn timed_rollout(
+    env: &mut dyn Env,
+    policy: &mut dyn Policy,
+    seed: u64,
+    times_ms: &mut Vec<f64>,
+) -> std::result::Result<(f64, usize), a2perf_core::RunError> {
+    let limit = env.spec().max_episode_steps.unwrap_or(usize::MAX);
+    let mut step = Step::default();
+    env.reset_into(Some(seed), &mut step.observation)?;
+    let mut ret = 0.0;
+    let mut len = 0usize;
+    loop {
+        let t = Instant::now();
+        let action = policy.act(&step.observation, ActMode::Greedy)?;
+        times_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        env.step_into(&action, &mut step)?;
+        ret += step.reward;
+        len += 1;
+        if step.terminated || step.truncated || len >= limit {
+            return Ok((ret, len));
+        }
+    }
+}

@@ -1,0 +1,320 @@
+//! The benchmark pipelines: train → infer → generalize → report, plus dataset collection.
+//!
+//! Every pipeline works on plain directories. An experiment directory
+//! `OUTPUT/EXPERIMENT_NAME/` holds one run directory per (task, algorithm, seed), named
+//! `<task>__<algorithm>__seed<k>`, with these files (all written atomically):
+//!
+//! | file | written by | contents |
+//! |---|---|---|
+//! | `status.json` | train | `running` or `complete` (reruns skip complete runs) |
+//! | `run.json` | train | [`RunRecord`]: task, resolved parameters, seed, settings |
+//! | `operative_config.ron` | train | every config value in force (when a config file was used) |
+//! | `system_info.json` | train | [`SystemInfo`] of the machine |
+//! | `curve.csv`, `curve.json` | train | evaluation return against environment steps |
+//! | `train_system.json` | train | system meters over the whole training |
+//! | `checkpoints/step_*.ckpt` | train | checkpoints at the configured interval |
+//! | `policy.ckpt` | train | the final policy |
+//! | `inference.json` | infer | rollout returns, per-call inference time, meters |
+//! | `generalization.json` | generalize | per-task mean returns and their sum |
+//! | `collect/` | collect | checkpoint evaluations, expertise levels, datasets |
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+pub use a2perf_core::CancelToken;
+use a2perf_core::{
+    Checkpoint, Env, EnvSpec, Policy, Registry, RegistryError, RunError, TrainingSettings,
+    results::ResultsError,
+};
+use serde::{Deserialize, Serialize};
+
+pub mod arrow;
+pub mod collect;
+pub mod generalize;
+pub mod infer;
+pub mod meters;
+pub mod minari;
+pub mod plan;
+pub mod progress;
+pub mod report;
+pub mod stats;
+pub mod sysinfo;
+pub mod train;
+
+pub use generalize::{GeneralizationResults, generalize_run};
+pub use infer::{InferOptions, InferenceResults, infer_run};
+pub use plan::{
+    AlgorithmSpec, ExperimentPlan, GeneralizationSettings, InferenceSettings, LoadedPlans,
+    MetricSettings, ObservationSource, RunJob, Shard, Suite, TaskSpec, from_experiment, grid,
+    load_plans, parse_seeds,
+};
+pub use sysinfo::SystemInfo;
+pub use train::{MeterFactory, RunOutcome, TrainOptions, TrainSummary, train, train_one};
+
+/// `run.json`.
+pub const RUN_FILE: &str = "run.json";
+/// `curve.csv`.
+pub const CURVE_CSV: &str = "curve.csv";
+/// `curve.json`.
+pub const CURVE_JSON: &str = "curve.json";
+/// `train_system.json`.
+pub const TRAIN_SYSTEM_FILE: &str = "train_system.json";
+/// `system_info.json`.
+pub const SYSTEM_INFO_FILE: &str = "system_info.json";
+/// `policy.ckpt`.
+pub const POLICY_FILE: &str = "policy.ckpt";
+/// `checkpoints/`.
+pub const CHECKPOINT_DIR: &str = "checkpoints";
+/// `inference.json`.
+pub const INFERENCE_FILE: &str = "inference.json";
+/// `generalization.json`.
+pub const GENERALIZATION_FILE: &str = "generalization.json";
+/// `operative_config.ron`.
+pub const OPERATIVE_FILE: &str = a2perf_core::config::OPERATIVE_CONFIG_FILE;
+
+/// Everything that can go wrong in a pipeline. Each variant names the file or run concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// Reading or writing a file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A results file or checkpoint exists but cannot be used.
+    #[error("{}: {reason}", path.display())]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// An environment or algorithm is unknown or badly parameterised.
+    #[error(transparent)]
+    Registry(#[from] RegistryError),
+    /// Training or a rollout failed.
+    #[error("{run}: {source}")]
+    Run {
+        /// The run directory.
+        run: String,
+        /// The error.
+        source: RunError,
+    },
+    /// A request that cannot be carried out (bad shard, no seeds, …).
+    #[error("{0}")]
+    Invalid(String),
+    /// Cancelled (Ctrl-C); the state on disk is resumable.
+    #[error("cancelled; rerun the same command to resume")]
+    Cancelled,
+}
+
+impl From<ResultsError> for PipelineError {
+    fn from(e: ResultsError) -> Self {
+        match e {
+            ResultsError::Io { path, source } => PipelineError::Io { path, source },
+            ResultsError::Corrupt { path, reason } => PipelineError::Corrupt { path, reason },
+        }
+    }
+}
+
+/// Shorthand.
+pub type Result<T, E = PipelineError> = std::result::Result<T, E>;
+
+pub(crate) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
+    move |source| PipelineError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Where an offline algorithm's training data came from, and what producing it cost.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatasetProvenance {
+    /// Dataset directory.
+    pub path: String,
+    /// Dataset id.
+    pub dataset_id: String,
+    /// Training sample cost: energy (kWh) spent training the policies that generated the data.
+    pub training_sample_cost_kwh: Option<f64>,
+    /// How the cost was obtained (`measured` or `pro_rata`).
+    pub cost_method: String,
+}
+
+impl DatasetProvenance {
+    /// The provenance of a dataset written by `collect`, used from `path`.
+    pub fn from_info(info: &collect::DatasetInfo, path: &str) -> Self {
+        Self {
+            path: path.into(),
+            dataset_id: info.dataset_id.clone(),
+            training_sample_cost_kwh: info.training_sample_cost_kwh,
+            cost_method: match info.cost_rule {
+                collect::CostRule::Measured => "measured".into(),
+                collect::CostRule::ProRata => "pro_rata".into(),
+            },
+        }
+    }
+}
+
+/// `run.json`: what a run is, with every parameter resolved.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// Layout version of this file.
+    pub format_version: u32,
+    /// Experiment name.
+    pub experiment: String,
+    /// The task.
+    pub task: TaskSpec,
+    /// The environment's domain (`circuit_training`, `web_navigation`, …).
+    pub domain: String,
+    /// The algorithm, hyperparameters resolved (defaults included).
+    pub algorithm: AlgorithmSpec,
+    /// The seed.
+    pub seed: u64,
+    /// Budgets and schedules.
+    pub training: TrainingSettings,
+    /// Inference settings used by `infer`.
+    pub inference: InferenceSettings,
+    /// Generalization settings used by `generalize`.
+    pub generalization: GeneralizationSettings,
+    /// Meter and statistics settings.
+    #[serde(default)]
+    pub metrics: MetricSettings,
+    /// Provenance recorded by the environment (netlist, clip, website hashes, …).
+    pub env_metadata: BTreeMap<String, String>,
+    /// For offline algorithms: the dataset and its sample cost.
+    #[serde(default)]
+    pub dataset: Option<DatasetProvenance>,
+}
+
+/// Current layout version of [`RunRecord`].
+pub const RUN_FORMAT_VERSION: u32 = 1;
+
+/// A run directory with its decoded `run.json`.
+#[derive(Clone, Debug)]
+pub struct LoadedRun {
+    /// The directory.
+    pub dir: PathBuf,
+    /// Its record.
+    pub record: RunRecord,
+}
+
+impl LoadedRun {
+    /// Reads `dir/run.json`, with errors naming the file.
+    pub fn open(dir: &Path) -> Result<Self> {
+        if !dir.is_dir() {
+            return Err(PipelineError::Invalid(format!(
+                "{}: not a run directory (it does not exist or is not a directory)",
+                dir.display()
+            )));
+        }
+        let path = dir.join(RUN_FILE);
+        if !path.is_file() {
+            return Err(PipelineError::Invalid(format!(
+                "{}: not a run directory (no {RUN_FILE}; run `a2perf train` first)",
+                dir.display()
+            )));
+        }
+        let record: RunRecord = a2perf_core::results::read_json(&path)?;
+        if record.format_version != RUN_FORMAT_VERSION {
+            return Err(PipelineError::Corrupt {
+                path,
+                reason: format!(
+                    "layout version {} is not supported (expected {RUN_FORMAT_VERSION})",
+                    record.format_version
+                ),
+            });
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            record,
+        })
+    }
+
+    /// Whether training finished.
+    pub fn is_complete(&self) -> Result<bool> {
+        Ok(a2perf_core::RunDir::new(&self.dir).is_complete()?)
+    }
+
+    /// Fails unless training finished.
+    pub fn require_complete(&self) -> Result<()> {
+        if self.is_complete()? {
+            Ok(())
+        } else {
+            Err(PipelineError::Invalid(format!(
+                "{}: training did not complete; rerun `a2perf train` to finish it",
+                self.dir.display()
+            )))
+        }
+    }
+
+    /// Builds the run's environment.
+    pub fn make_env(&self, registry: &Registry) -> Result<Box<dyn Env>> {
+        Ok(registry.make_env(&self.record.task.env_id, &self.record.task.env_params)?)
+    }
+
+    /// Loads the final policy for an environment with `spec`.
+    pub fn load_policy(&self, registry: &Registry, spec: &EnvSpec) -> Result<Box<dyn Policy>> {
+        load_checkpoint_policy(registry, &self.dir.join(POLICY_FILE), spec)
+    }
+
+    /// Short name of the run (its directory name).
+    pub fn name(&self) -> String {
+        self.dir.file_name().map_or_else(
+            || self.dir.display().to_string(),
+            |n| n.to_string_lossy().into(),
+        )
+    }
+}
+
+/// Reads a checkpoint file and rebuilds its policy with the registered loader.
+pub fn load_checkpoint_policy(
+    registry: &Registry,
+    path: &Path,
+    spec: &EnvSpec,
+) -> Result<Box<dyn Policy>> {
+    let bytes = std::fs::read(path).map_err(io_err(path))?;
+    let ckpt = Checkpoint::from_bytes(&bytes).map_err(|e| PipelineError::Corrupt {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    let entry = registry.algorithm(&ckpt.algorithm)?;
+    (entry.load_policy)(&ckpt, spec).map_err(|e| PipelineError::Corrupt {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })
+}
+
+/// Finds run directories (those holding `run.json`) at or below `root`, up to three levels deep,
+/// sorted by path.
+pub fn find_runs(root: &Path) -> Result<Vec<PathBuf>> {
+    fn walk(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<()> {
+        if dir.join(RUN_FILE).is_file() {
+            out.push(dir.to_path_buf());
+            return Ok(());
+        }
+        if depth == 0 {
+            return Ok(());
+        }
+        let entries = std::fs::read_dir(dir).map_err(io_err(dir))?;
+        for e in entries {
+            let e = e.map_err(io_err(dir))?;
+            let p = e.path();
+            if p.is_dir() && !e.file_name().to_string_lossy().starts_with('.') {
+                walk(&p, depth - 1, out)?;
+            }
+        }
+        Ok(())
+    }
+    if !root.is_dir() {
+        return Err(PipelineError::Invalid(format!(
+            "{}: no such directory",
+            root.display()
+        )));
+    }
+    let mut out = Vec::new();
+    walk(root, 3, &mut out)?;
+    out.sort();
+    Ok(out)
+}

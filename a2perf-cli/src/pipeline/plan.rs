@@ -1,0 +1,573 @@
+//! What to run: experiments (task × algorithm × seeds), the run grid and its shards.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::str::FromStr;
+use std::sync::Arc;
+
+use a2perf_core::{TrainingSettings, Value};
+use serde::{Deserialize, Serialize};
+
+use super::{DatasetProvenance, PipelineError, Result};
+
+/// A task: an environment id with its parameters, under a short name used in run directories.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TaskSpec {
+    /// Short name (`dog_pace`, or the environment id when the config gives none).
+    pub name: String,
+    /// Registered environment id.
+    pub env_id: String,
+    /// Environment parameters (resolved in `run.json`).
+    pub env_params: BTreeMap<String, Value>,
+}
+
+/// An algorithm and its hyperparameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AlgorithmSpec {
+    /// Registered name.
+    pub name: String,
+    /// Hyperparameters (resolved in `run.json`).
+    pub params: BTreeMap<String, Value>,
+}
+
+/// Which observations the inference timer uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObservationSource {
+    /// Every `act` call made during the rollouts is timed (what a deployed policy sees).
+    Rollouts,
+    /// `timing_samples` observations drawn uniformly from the observation space, as the original
+    /// harness did (the rollout calls are timed too, for comparison).
+    Random,
+}
+
+/// How `infer` measures a policy.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InferenceSettings {
+    /// Greedy rollouts (the paper: 100).
+    pub episodes: usize,
+    /// Calls timed on random observations when `observation_source` is `random`.
+    pub timing_samples: usize,
+    /// Which observations the reported inference time is measured on.
+    pub observation_source: ObservationSource,
+}
+
+impl Default for InferenceSettings {
+    fn default() -> Self {
+        Self {
+            episodes: 100,
+            timing_samples: 1000,
+            observation_source: ObservationSource::Rollouts,
+        }
+    }
+}
+
+/// How `generalize` measures a policy.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GeneralizationSettings {
+    /// Greedy rollouts per task (the paper: 100).
+    pub episodes: usize,
+}
+
+impl Default for GeneralizationSettings {
+    fn default() -> Self {
+        Self { episodes: 100 }
+    }
+}
+
+/// Settings of the system meters and of the statistics (from the config's `metrics` section).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MetricSettings {
+    /// Seconds between RAM samples.
+    pub ram_sample_interval_s: f64,
+    /// Grid carbon intensity, g CO2-eq per kWh.
+    pub carbon_intensity_g_per_kwh: f64,
+    /// `auto`, `rapl` or `estimate`.
+    pub energy_method: String,
+    /// `a2perf` or `chan2019`.
+    pub reliability_definition: String,
+    /// Bootstrap resamples for confidence intervals.
+    pub bootstrap_reps: usize,
+}
+
+impl Default for MetricSettings {
+    fn default() -> Self {
+        Self {
+            ram_sample_interval_s: 1.0,
+            carbon_intensity_g_per_kwh: 475.0,
+            energy_method: "auto".into(),
+            reliability_definition: "a2perf".into(),
+            bootstrap_reps: 50_000,
+        }
+    }
+}
+
+/// Writes the operative config of an experiment into a run directory (given as argument).
+pub type OperativeWriter =
+    Arc<dyn Fn(&std::path::Path) -> std::result::Result<(), String> + Send + Sync>;
+
+/// One experiment: a task, an algorithm, its seeds and settings.
+#[derive(Clone)]
+pub struct ExperimentPlan {
+    /// Experiment name (the directory under `output`).
+    pub name: String,
+    /// Output root.
+    pub output: PathBuf,
+    /// The task.
+    pub task: TaskSpec,
+    /// The algorithm.
+    pub algorithm: AlgorithmSpec,
+    /// Seeds, one run each.
+    pub seeds: Vec<u64>,
+    /// Budgets.
+    pub training: TrainingSettings,
+    /// Inference settings.
+    pub inference: InferenceSettings,
+    /// Generalization settings.
+    pub generalization: GeneralizationSettings,
+    /// Meter and statistics settings.
+    pub metrics: MetricSettings,
+    /// For offline algorithms: where the dataset came from and its sample cost.
+    pub dataset: Option<DatasetProvenance>,
+    /// Writes `operative_config.ron` (absent when the plan was not built from a config file).
+    pub operative: Option<OperativeWriter>,
+}
+
+impl std::fmt::Debug for ExperimentPlan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ExperimentPlan")
+            .field("name", &self.name)
+            .field("output", &self.output)
+            .field("task", &self.task)
+            .field("algorithm", &self.algorithm)
+            .field("seeds", &self.seeds)
+            .field("training", &self.training)
+            .finish_non_exhaustive()
+    }
+}
+
+impl ExperimentPlan {
+    /// A plan with default inference and generalization settings.
+    pub fn new(
+        name: &str,
+        output: impl Into<PathBuf>,
+        task: TaskSpec,
+        algorithm: AlgorithmSpec,
+        seeds: Vec<u64>,
+        training: TrainingSettings,
+    ) -> Self {
+        Self {
+            name: name.into(),
+            output: output.into(),
+            task,
+            algorithm,
+            seeds,
+            training,
+            inference: InferenceSettings::default(),
+            generalization: GeneralizationSettings::default(),
+            metrics: MetricSettings::default(),
+            dataset: None,
+            operative: None,
+        }
+    }
+
+    /// `OUTPUT/NAME`.
+    pub fn experiment_dir(&self) -> PathBuf {
+        self.output.join(&self.name)
+    }
+
+    /// Directory of the run with `seed`.
+    pub fn run_dir(&self, seed: u64) -> PathBuf {
+        self.experiment_dir()
+            .join(run_dir_name(&self.task.name, &self.algorithm.name, seed))
+    }
+}
+
+/// The plan of a loaded experiment config. The task is named after the environment id, with
+/// the parameters that differ from the registry's defaults appended (`Id[k=v,...]`), so two
+/// experiments on differently parameterised copies of one environment stay apart in reports.
+pub fn from_experiment(
+    exp: &a2perf_core::Experiment,
+    registry: &a2perf_core::Registry,
+) -> Result<ExperimentPlan> {
+    use a2perf_core::config::ObservationSource as Source;
+    let invalid = |e: a2perf_core::ConfigError| PipelineError::Invalid(e.to_string());
+    let env = exp.require_env().map_err(invalid)?;
+    let algo = exp.require_algorithm().map_err(invalid)?;
+    let defaults = registry.env_params(&env.id, &BTreeMap::new())?;
+    let changed: Vec<String> = env
+        .params
+        .values()
+        .iter()
+        .filter(|(k, v)| defaults.values().get(*k) != Some(*v))
+        .map(|(k, v)| format!("{k}={v}"))
+        .collect();
+    let task_name = if changed.is_empty() {
+        env.id.clone()
+    } else {
+        format!("{}[{}]", env.id, changed.join(","))
+    };
+    if exp.seeds.is_empty() {
+        return Err(PipelineError::Invalid(format!(
+            "experiment {}: no seeds",
+            exp.name
+        )));
+    }
+    use a2perf_core::config::{EnergyMethod, ReliabilityDefinition};
+    let metrics = MetricSettings {
+        ram_sample_interval_s: exp.metrics.ram_sample_interval_s,
+        carbon_intensity_g_per_kwh: exp.metrics.carbon_intensity_g_per_kwh,
+        energy_method: match exp.metrics.energy_method {
+            EnergyMethod::Auto => "auto",
+            EnergyMethod::Rapl => "rapl",
+            EnergyMethod::Estimate => "estimate",
+        }
+        .into(),
+        reliability_definition: match exp.metrics.reliability_definition {
+            ReliabilityDefinition::A2Perf => "a2perf",
+            ReliabilityDefinition::Chan2019 => "chan2019",
+        }
+        .into(),
+        bootstrap_reps: exp.metrics.bootstrap_reps,
+    };
+    let operative = exp.clone();
+    let mut plan = ExperimentPlan::new(
+        &exp.name,
+        exp.output.dir.clone(),
+        TaskSpec {
+            name: task_name,
+            env_id: env.id.clone(),
+            env_params: env.params.values().clone(),
+        },
+        AlgorithmSpec {
+            name: algo.name.clone(),
+            params: algo.params.values().clone(),
+        },
+        exp.seeds.clone(),
+        exp.training.clone(),
+    );
+    plan.inference = InferenceSettings {
+        episodes: exp.inference.rollouts,
+        timing_samples: exp.inference.timing_samples,
+        observation_source: match exp.inference.observation_source {
+            Source::Rollouts => ObservationSource::Rollouts,
+            Source::Random => ObservationSource::Random,
+        },
+    };
+    plan.generalization = GeneralizationSettings {
+        episodes: exp.generalization.episodes,
+    };
+    plan.metrics = metrics;
+    if let Some(path) = algo.params.get("dataset").and_then(Value::as_str) {
+        plan.dataset = super::collect::dataset_info_for(std::path::Path::new(path))?
+            .map(|info| DatasetProvenance::from_info(&info, path));
+    }
+    plan.operative = Some(Arc::new(move |dir: &std::path::Path| {
+        operative
+            .write_operative(dir)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    }));
+    Ok(plan)
+}
+
+/// `s` with characters that are awkward in paths replaced by `_`.
+pub fn path_safe(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// `<task>__<algorithm>__seed<k>`, made [`path_safe`].
+pub fn run_dir_name(task: &str, algorithm: &str, seed: u64) -> String {
+    format!("{}__{}__seed{seed}", path_safe(task), path_safe(algorithm))
+}
+
+/// One cell of the grid: an experiment and one of its seeds.
+#[derive(Clone, Debug)]
+pub struct RunJob {
+    /// Position in the full grid (what shards split on).
+    pub index: usize,
+    /// The experiment.
+    pub plan: ExperimentPlan,
+    /// The seed.
+    pub seed: u64,
+}
+
+/// The full seed × task grid, in a deterministic order (experiments in the order given, then
+/// seeds), optionally restricted to one shard.
+///
+/// ```
+/// use a2perf_cli::pipeline::{grid, AlgorithmSpec, ExperimentPlan, Shard, TaskSpec};
+/// let task = TaskSpec { name: "t".into(), env_id: "T-v0".into(), env_params: Default::default() };
+/// let algo = AlgorithmSpec { name: "a".into(), params: Default::default() };
+/// let plan = ExperimentPlan::new("e", "/tmp/out", task, algo, vec![0, 1, 2], Default::default());
+/// assert_eq!(grid(&[plan.clone()], None).len(), 3);
+/// let shard = Shard::new(1, 2).unwrap();
+/// let jobs = grid(&[plan], Some(shard));
+/// assert_eq!(jobs.iter().map(|j| j.seed).collect::<Vec<_>>(), vec![1]);
+/// ```
+pub fn grid(plans: &[ExperimentPlan], shard: Option<Shard>) -> Vec<RunJob> {
+    let mut out = Vec::new();
+    let mut index = 0;
+    for plan in plans {
+        for &seed in &plan.seeds {
+            if shard.is_none_or(|s| s.contains(index)) {
+                out.push(RunJob {
+                    index,
+                    plan: plan.clone(),
+                    seed,
+                });
+            }
+            index += 1;
+        }
+    }
+    out
+}
+
+/// Shard `index` of `count` (0-based, as `SLURM_ARRAY_TASK_ID` with `--array=0-(N-1)` and
+/// Kubernetes' `JOB_COMPLETION_INDEX`): grid cells whose position modulo `count` is `index`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    index: usize,
+    count: usize,
+}
+
+impl Shard {
+    /// Shard `index` of `count`.
+    pub fn new(index: usize, count: usize) -> Result<Self> {
+        if count == 0 || index >= count {
+            return Err(PipelineError::Invalid(format!(
+                "shard {index}/{count}: expected i/N with 0 <= i < N"
+            )));
+        }
+        Ok(Self { index, count })
+    }
+
+    /// Whether grid cell `position` belongs to this shard.
+    pub fn contains(&self, position: usize) -> bool {
+        position % self.count == self.index
+    }
+}
+
+impl FromStr for Shard {
+    type Err = PipelineError;
+
+    fn from_str(s: &str) -> Result<Self> {
+        let bad = || PipelineError::Invalid(format!("--shard `{s}`: expected i/N, e.g. 0/4"));
+        let (i, n) = s.split_once('/').ok_or_else(bad)?;
+        let i = i.trim().parse().map_err(|_| bad())?;
+        let n = n.trim().parse().map_err(|_| bad())?;
+        Shard::new(i, n)
+    }
+}
+
+/// Parses a seed list: `0..10` (exclusive), `0..=9`, `3`, or a comma list of those.
+///
+/// ```
+/// use a2perf_cli::pipeline::parse_seeds;
+/// assert_eq!(parse_seeds("0..3").unwrap(), vec![0, 1, 2]);
+/// assert_eq!(parse_seeds("1,4..=5").unwrap(), vec![1, 4, 5]);
+/// assert!(parse_seeds("3..1").is_err());
+/// ```
+pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
+    let bad = |why: &str| PipelineError::Invalid(format!("--seeds `{text}`: {why}"));
+    let num = |s: &str| -> Result<u64> {
+        s.trim()
+            .parse()
+            .map_err(|_| bad(&format!("`{}` is not a non-negative integer", s.trim())))
+    };
+    let mut out = Vec::new();
+    for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        if let Some((a, b)) = part.split_once("..=") {
+            let (a, b) = (num(a)?, num(b)?);
+            if a > b {
+                return Err(bad("empty range"));
+            }
+            out.extend(a..=b);
+        } else if let Some((a, b)) = part.split_once("..") {
+            let (a, b) = (num(a)?, num(b)?);
+            if a >= b {
+                return Err(bad("empty range"));
+            }
+            out.extend(a..b);
+        } else {
+            out.push(num(part)?);
+        }
+        if out.len() > 1_000_000 {
+            return Err(bad("too many seeds"));
+        }
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    out.retain(|s| seen.insert(*s));
+    if out.is_empty() {
+        return Err(bad("no seeds"));
+    }
+    Ok(out)
+}
+
+/// One entry of a suite file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SuiteEntry {
+    /// Experiment config, relative to the suite file.
+    pub config: String,
+    /// `dotted.path=value` overrides for this experiment (after the suite's own).
+    #[serde(default)]
+    pub set: Vec<String>,
+}
+
+/// A suite file: several experiment configs run and reported together (e.g.
+/// `configs/quickstart.ron`). Recognised by its top-level `experiments` key.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Suite {
+    /// Name, used for the report directory.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Overrides applied to every experiment (before each entry's own).
+    #[serde(default)]
+    pub set: Vec<String>,
+    /// The experiments.
+    pub experiments: Vec<SuiteEntry>,
+    /// Where `a2perf run` writes the report (relative to the working directory).
+    #[serde(default)]
+    pub report_dir: Option<String>,
+}
+
+/// Whether RON text is a suite (a top-level `experiments` key) rather than one experiment.
+fn looks_like_suite(text: &str) -> bool {
+    text.lines()
+        .map(|l| l.split("//").next().unwrap_or("").trim_start())
+        .any(|l| l.starts_with("experiments:") || l.starts_with("experiments :"))
+}
+
+/// Plans loaded from config files, plus the report directory a suite asks for.
+#[derive(Debug, Default)]
+pub struct LoadedPlans {
+    /// One plan per experiment, in file order.
+    pub plans: Vec<ExperimentPlan>,
+    /// A suite's `report_dir`, if any.
+    pub report_dir: Option<PathBuf>,
+    /// A suite's name, if any.
+    pub suite_name: Option<String>,
+}
+
+/// Loads experiment configs or suite files, applying `sets` (`dotted.path=value`) to every
+/// experiment last and replacing the seeds with `seeds` when given.
+pub fn load_plans(
+    paths: &[PathBuf],
+    sets: &[String],
+    seeds: Option<&[u64]>,
+    registry: &a2perf_core::Registry,
+) -> Result<LoadedPlans> {
+    let mut out = LoadedPlans::default();
+    let load_one = |path: &std::path::Path, overrides: Vec<String>| -> Result<ExperimentPlan> {
+        let exp = a2perf_core::Experiment::load(path, &overrides, registry)
+            .map_err(|e| PipelineError::Invalid(e.to_string()))?;
+        let mut plan = from_experiment(&exp, registry)?;
+        if let Some(seeds) = seeds {
+            plan.seeds = seeds.to_vec();
+        }
+        Ok(plan)
+    };
+    for path in paths {
+        let text = std::fs::read_to_string(path).map_err(super::io_err(path))?;
+        if looks_like_suite(&text) {
+            let suite: Suite = ron::from_str(&text).map_err(|e| {
+                PipelineError::Invalid(format!(
+                    "{}:{}:{}: {}",
+                    path.display(),
+                    e.span.start.line,
+                    e.span.start.col,
+                    e.code
+                ))
+            })?;
+            let base = path.parent().unwrap_or(std::path::Path::new("."));
+            for entry in &suite.experiments {
+                let mut overrides = suite.set.clone();
+                overrides.extend(entry.set.iter().cloned());
+                overrides.extend(sets.iter().cloned());
+                out.plans
+                    .push(load_one(&base.join(&entry.config), overrides)?);
+            }
+            if out.report_dir.is_none() {
+                out.report_dir = suite.report_dir.map(PathBuf::from);
+                out.suite_name = suite.name;
+            }
+        } else {
+            out.plans.push(load_one(path, sets.to_vec())?);
+        }
+    }
+    let mut dirs = std::collections::BTreeSet::new();
+    for p in &out.plans {
+        for s in &p.seeds {
+            if !dirs.insert(p.run_dir(*s)) {
+                return Err(PipelineError::Invalid(format!(
+                    "two experiments write to {}; give them different `name`s",
+                    p.run_dir(*s).display()
+                )));
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_partition_the_grid() {
+        let task = TaskSpec {
+            name: "t".into(),
+            env_id: "T-v0".into(),
+            env_params: BTreeMap::new(),
+        };
+        let algo = AlgorithmSpec {
+            name: "a".into(),
+            params: BTreeMap::new(),
+        };
+        let p1 = ExperimentPlan::new(
+            "e",
+            "/o",
+            task.clone(),
+            algo.clone(),
+            (0..7).collect(),
+            TrainingSettings::default(),
+        );
+        let mut p2 = p1.clone();
+        p2.task.name = "u".into();
+        let plans = [p1, p2];
+        let all: Vec<usize> = grid(&plans, None).iter().map(|j| j.index).collect();
+        let mut union = Vec::new();
+        for i in 0..3 {
+            union.extend(
+                grid(&plans, Some(Shard::new(i, 3).unwrap()))
+                    .iter()
+                    .map(|j| j.index),
+            );
+        }
+        union.sort();
+        assert_eq!(union, all);
+        assert_eq!(all.len(), 14);
+    }
+
+    #[test]
+    fn bad_shards_are_errors() {
+        for s in ["3/3", "1", "a/b", "0/0", "-1/2"] {
+            assert!(s.parse::<Shard>().is_err(), "{s}");
+        }
+    }
+
+    #[test]
+    fn run_dir_names_are_path_safe() {
+        assert_eq!(run_dir_name("a/b c", "ppo", 3), "a_b_c__ppo__seed3");
+    }
+}

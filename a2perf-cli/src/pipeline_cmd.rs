@@ -1,0 +1,451 @@
+//! `a2perf train | infer | generalize | report | run | collect`: the clap front end of the
+//! pipelines in `a2perf_cli::pipeline`.
+
+use std::path::{Path, PathBuf};
+
+use a2perf_cli::pipeline::{
+    self, CancelToken, ExperimentPlan, InferOptions, ObservationSource, TrainOptions,
+    collect::{CollectOptions, CostRule},
+    report::ReportOptions,
+};
+use a2perf_core::Registry;
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+
+/// Arguments of `a2perf train`.
+#[derive(Args, Debug)]
+pub struct TrainArgs {
+    /// Experiment configs (or suite files such as configs/quickstart.ron).
+    #[arg(required = true)]
+    pub configs: Vec<PathBuf>,
+    /// Config override `dotted.path=value`, applied to every experiment (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Seeds, replacing the configs': `0..10`, `0..=9`, `1,3,5`.
+    #[arg(long)]
+    pub seeds: Option<String>,
+    /// Run only shard `i` of `N` of the seed × task grid (0-based, e.g. `$SLURM_ARRAY_TASK_ID/N`).
+    #[arg(long, value_name = "i/N")]
+    pub shard: Option<String>,
+    /// Runs trained at the same time (0 = one per CPU). Meters measure the whole process, so
+    /// with more than one the system metrics cover all concurrent runs (the report says so).
+    #[arg(long, default_value_t = 1)]
+    pub jobs: usize,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Arguments of `a2perf infer`.
+#[derive(Args, Debug)]
+pub struct InferArgs {
+    /// Run directories (or experiment directories holding them).
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Greedy rollouts (default: the run's config, 100 unless changed).
+    #[arg(long)]
+    pub episodes: Option<usize>,
+    /// Observations the reported inference time is measured on.
+    #[arg(long, value_enum)]
+    pub observations: Option<ObsArg>,
+    /// Calls timed on random observations (with `--observations random`).
+    #[arg(long)]
+    pub timing_samples: Option<usize>,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Which observations `infer` times.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum ObsArg {
+    /// Every call made during the rollouts.
+    Rollouts,
+    /// Uniform samples of the observation space (the original harness's method).
+    Random,
+}
+
+/// Arguments of `a2perf generalize`.
+#[derive(Args, Debug)]
+pub struct GeneralizeArgs {
+    /// Run directories (or experiment directories holding them).
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Rollouts per task (default: the run's config, 100 unless changed).
+    #[arg(long)]
+    pub episodes: Option<usize>,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Arguments of `a2perf report`.
+#[derive(Args, Debug)]
+pub struct ReportArgs {
+    /// Experiment directories (or run directories); their runs are merged.
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Output directory (default: `report/` inside the first directory).
+    #[arg(short = 'o', long)]
+    pub output: Option<PathBuf>,
+    /// Bootstrap resamples for confidence intervals (default: the runs' config, 50,000).
+    #[arg(long)]
+    pub bootstrap_reps: Option<usize>,
+}
+
+/// Arguments of `a2perf run`.
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// Experiment configs or suite files (e.g. configs/quickstart.ron).
+    #[arg(required = true)]
+    pub configs: Vec<PathBuf>,
+    /// Config override `dotted.path=value`, applied to every experiment (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Seeds, replacing the configs'.
+    #[arg(long)]
+    pub seeds: Option<String>,
+    /// Runs trained at the same time (0 = one per CPU).
+    #[arg(long, default_value_t = 1)]
+    pub jobs: usize,
+    /// Report directory (default: the suite's `report_dir`, else `report/` in the first
+    /// experiment directory).
+    #[arg(short = 'o', long)]
+    pub output: Option<PathBuf>,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Arguments of `a2perf collect`.
+#[derive(Args, Debug)]
+pub struct CollectArgs {
+    /// Run directories (or experiment directories holding them) whose checkpoints to use.
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Episodes per checkpoint evaluation.
+    #[arg(long, default_value_t = 100)]
+    pub eval_episodes: usize,
+    /// Episodes per dataset (per expertise level).
+    #[arg(long, default_value_t = 100)]
+    pub dataset_episodes: usize,
+    /// Training sample cost: energy measured up to each checkpoint, or the original's pro-rata
+    /// rule (total energy × checkpoint / last checkpoint).
+    #[arg(long, value_enum, default_value_t = CostArg::Measured)]
+    pub cost: CostArg,
+    /// Assign levels with the paper's one-σ wording instead of the original code's rule.
+    #[arg(long)]
+    pub one_sigma: bool,
+    /// Output directory for the datasets (default: `datasets/` next to the experiment).
+    #[arg(short = 'o', long)]
+    pub output: Option<PathBuf>,
+    /// Hide progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// How the training sample cost is assigned.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum CostArg {
+    /// Energy measured up to the checkpoint (interpolated over the recorded curve's wall time).
+    Measured,
+    /// The original's rule: total energy × checkpoint number / last checkpoint number.
+    ProRata,
+}
+
+fn cancel_on_ctrl_c() -> CancelToken {
+    let token = CancelToken::new();
+    let t = token.clone();
+    let mut pressed = false;
+    // A second Ctrl-C exits at once; the first lets runs stop at their next progress call.
+    let _ = ctrlc::set_handler(move || {
+        if pressed {
+            std::process::exit(130);
+        }
+        pressed = true;
+        eprintln!(
+            "\ninterrupted: stopping runs (their directories stay resumable); Ctrl-C again to exit now"
+        );
+        t.cancel();
+    });
+    token
+}
+
+fn expand_runs(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for d in dirs {
+        let found = pipeline::find_runs(d)?;
+        if found.is_empty() {
+            bail!("{}: no run directories (no run.json) found", d.display());
+        }
+        out.extend(found);
+    }
+    Ok(out)
+}
+
+fn load(
+    registry: &Registry,
+    configs: &[PathBuf],
+    set: &[String],
+    seeds: Option<&str>,
+) -> Result<pipeline::LoadedPlans> {
+    let seeds = seeds.map(pipeline::parse_seeds).transpose()?;
+    Ok(pipeline::load_plans(
+        configs,
+        set,
+        seeds.as_deref(),
+        registry,
+    )?)
+}
+
+fn train_plans(
+    registry: &Registry,
+    plans: &[ExperimentPlan],
+    shard: Option<pipeline::Shard>,
+    jobs: usize,
+    quiet: bool,
+    cancel: &CancelToken,
+) -> Result<()> {
+    let grid = pipeline::grid(plans, shard);
+    let opts = TrainOptions {
+        jobs,
+        cancel: cancel.clone(),
+        meters: pipeline::meters::system_meters(),
+        show_progress: !quiet,
+    };
+    let summary = pipeline::train(registry, &grid, &opts)?;
+    let done = summary.with(&pipeline::RunOutcome::Completed).len();
+    let skipped = summary.with(&pipeline::RunOutcome::Skipped).len();
+    let cancelled = summary.with(&pipeline::RunOutcome::Cancelled).len();
+    eprintln!("train: {done} trained, {skipped} already complete, {cancelled} not finished");
+    for (dir, why) in summary.failures() {
+        eprintln!("  failed: {}: {why}", dir.display());
+    }
+    if cancel.is_cancelled() {
+        return Err(pipeline::PipelineError::Cancelled.into());
+    }
+    if !summary.failures().is_empty() {
+        bail!("{} run(s) failed", summary.failures().len());
+    }
+    Ok(())
+}
+
+/// `a2perf train`.
+pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
+    let loaded = load(registry, &args.configs, &args.set, args.seeds.as_deref())?;
+    let shard = args.shard.as_deref().map(str::parse).transpose()?;
+    let cancel = cancel_on_ctrl_c();
+    train_plans(
+        registry,
+        &loaded.plans,
+        shard,
+        args.jobs,
+        args.quiet,
+        &cancel,
+    )
+}
+
+fn infer_dirs(registry: &Registry, dirs: &[PathBuf], opts: &InferOptions) -> Result<()> {
+    for dir in dirs {
+        let r = pipeline::infer_run(registry, dir, opts)
+            .with_context(|| format!("infer {}", dir.display()))?;
+        println!(
+            "{}: return {:.3} ± {:.3} over {} episodes; inference {:.4} ms/call (p99 {:.4})",
+            dir.display(),
+            r.returns.mean,
+            r.returns.std,
+            r.episodes,
+            r.inference_time_ms.mean,
+            r.inference_time_ms.p99
+        );
+    }
+    Ok(())
+}
+
+/// `a2perf infer`.
+pub fn infer(registry: &Registry, args: &InferArgs) -> Result<()> {
+    let opts = InferOptions {
+        episodes: args.episodes,
+        observation_source: args.observations.map(|o| match o {
+            ObsArg::Rollouts => ObservationSource::Rollouts,
+            ObsArg::Random => ObservationSource::Random,
+        }),
+        timing_samples: args.timing_samples,
+        meters: pipeline::meters::system_meters(),
+        show_progress: !args.quiet,
+    };
+    infer_dirs(registry, &expand_runs(&args.dirs)?, &opts)
+}
+
+fn generalize_dirs(
+    registry: &Registry,
+    dirs: &[PathBuf],
+    episodes: Option<usize>,
+    quiet: bool,
+) -> Result<()> {
+    for dir in dirs {
+        let r = pipeline::generalize_run(registry, dir, episodes, !quiet)
+            .with_context(|| format!("generalize {}", dir.display()))?;
+        let per_task: Vec<String> = r
+            .tasks
+            .iter()
+            .map(|t| match (t.mean_return, &t.error) {
+                (Some(m), _) => format!("{} {m:.3}", t.name),
+                (None, Some(e)) => format!("{} failed ({e})", t.name),
+                (None, None) => format!("{} —", t.name),
+            })
+            .collect();
+        match r.sum_of_mean_returns {
+            Some(s) => println!(
+                "{}: generalization {s:.3} = {}",
+                dir.display(),
+                per_task.join(" + ")
+            ),
+            None => println!(
+                "{}: generalization incomplete: {}",
+                dir.display(),
+                per_task.join(", ")
+            ),
+        }
+    }
+    Ok(())
+}
+
+/// `a2perf generalize`.
+pub fn generalize(registry: &Registry, args: &GeneralizeArgs) -> Result<()> {
+    generalize_dirs(
+        registry,
+        &expand_runs(&args.dirs)?,
+        args.episodes,
+        args.quiet,
+    )
+}
+
+fn bootstrap_reps(dirs: &[PathBuf]) -> Result<usize> {
+    for d in dirs {
+        if let Some(run) = pipeline::find_runs(d)?.first() {
+            return Ok(pipeline::LoadedRun::open(run)?
+                .record
+                .metrics
+                .bootstrap_reps);
+        }
+    }
+    Ok(pipeline::MetricSettings::default().bootstrap_reps)
+}
+
+fn write_report(dirs: &[PathBuf], out: &Path, reps: Option<usize>) -> Result<()> {
+    let opts = ReportOptions {
+        bootstrap_reps: match reps {
+            Some(r) => r,
+            None => bootstrap_reps(dirs)?,
+        },
+        seed: 0,
+    };
+    let report = pipeline::report::write_report(dirs, out, &opts)?;
+    println!(
+        "report: {} (task, algorithm) groups -> {}",
+        report.groups.len(),
+        out.display()
+    );
+    for (dir, why) in &report.skipped_runs {
+        eprintln!("  left out {dir}: {why}");
+    }
+    Ok(())
+}
+
+/// `a2perf report`.
+pub fn report(args: &ReportArgs) -> Result<()> {
+    let out = args
+        .output
+        .clone()
+        .unwrap_or_else(|| args.dirs[0].join("report"));
+    write_report(&args.dirs, &out, args.bootstrap_reps)
+}
+
+/// `a2perf run`: train → infer → generalize → report.
+pub fn run(registry: &Registry, args: &RunArgs) -> Result<()> {
+    let loaded = load(registry, &args.configs, &args.set, args.seeds.as_deref())?;
+    let cancel = cancel_on_ctrl_c();
+    eprintln!("== train");
+    train_plans(
+        registry,
+        &loaded.plans,
+        None,
+        args.jobs,
+        args.quiet,
+        &cancel,
+    )?;
+    let mut experiments: Vec<PathBuf> = loaded.plans.iter().map(|p| p.experiment_dir()).collect();
+    experiments.dedup();
+    let runs: Vec<PathBuf> = loaded
+        .plans
+        .iter()
+        .flat_map(|p| p.seeds.iter().map(|s| p.run_dir(*s)))
+        .collect();
+    eprintln!("== infer");
+    let opts = InferOptions {
+        meters: pipeline::meters::system_meters(),
+        show_progress: !args.quiet,
+        ..Default::default()
+    };
+    for dir in &runs {
+        if cancel.is_cancelled() {
+            return Err(pipeline::PipelineError::Cancelled.into());
+        }
+        // Resuming `run`: a phase already done for a run is not redone (a retrained run
+        // starts from an empty directory, so its old results cannot linger).
+        if dir.join(pipeline::INFERENCE_FILE).is_file() {
+            continue;
+        }
+        infer_dirs(registry, std::slice::from_ref(dir), &opts)?;
+    }
+    eprintln!("== generalize");
+    for dir in &runs {
+        if cancel.is_cancelled() {
+            return Err(pipeline::PipelineError::Cancelled.into());
+        }
+        if dir.join(pipeline::GENERALIZATION_FILE).is_file() {
+            continue;
+        }
+        generalize_dirs(registry, std::slice::from_ref(dir), None, args.quiet)?;
+    }
+    eprintln!("== report");
+    let out = args
+        .output
+        .clone()
+        .or(loaded.report_dir)
+        .unwrap_or_else(|| experiments[0].join("report"));
+    write_report(&experiments, &out, None)
+}
+
+/// `a2perf collect`.
+pub fn collect(registry: &Registry, args: &CollectArgs) -> Result<()> {
+    let runs = expand_runs(&args.dirs)?;
+    let opts = CollectOptions {
+        eval_episodes: args.eval_episodes,
+        dataset_episodes: args.dataset_episodes,
+        cost: match args.cost {
+            CostArg::Measured => CostRule::Measured,
+            CostArg::ProRata => CostRule::ProRata,
+        },
+        one_sigma: args.one_sigma,
+        show_progress: !args.quiet,
+    };
+    let out = args.output.clone().unwrap_or_else(|| {
+        runs[0]
+            .parent()
+            .map_or_else(|| PathBuf::from("datasets"), |p| p.join("datasets"))
+    });
+    let summary = pipeline::collect::collect(registry, &runs, &out, &opts)?;
+    for d in &summary.datasets {
+        println!(
+            "{}: {} episodes, {} steps, training sample cost {} kWh",
+            d.path.display(),
+            d.episodes,
+            d.steps,
+            d.training_sample_cost_kwh
+                .map_or_else(|| "unknown".into(), |c| format!("{c:.3e}"))
+        );
+    }
+    Ok(())
+}

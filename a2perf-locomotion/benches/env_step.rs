@@ -1,0 +1,132 @@
+//! Env steps/s (33 physics substeps each), reset time, raw physics substeps/s, and allocations
+//! per env step (counting global allocator).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::hint::black_box;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use a2perf_core::{Action, Env, Observation, Step};
+use a2perf_locomotion::env::{EnvConfig, LocomotionEnv, MotionSource};
+use a2perf_locomotion::gait::Gait;
+use a2perf_locomotion::{RobotModel, SimConfig, Simulation};
+use criterion::{Criterion, criterion_group, criterion_main};
+
+struct Counting;
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) }
+    }
+}
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn make_with(solver_iterations: usize) -> LocomotionEnv {
+    let mut cfg = EnvConfig::new(
+        "QuadrupedLocomotion-DogPace-v0",
+        MotionSource::Generated(Gait::Pace),
+    );
+    cfg.solver_iterations = solver_iterations;
+    LocomotionEnv::new(cfg).unwrap()
+}
+
+fn make() -> LocomotionEnv {
+    make_with(SimConfig::default().solver_iterations)
+}
+
+fn allocations_per_step() {
+    let mut env = make();
+    let mut obs = Observation::default();
+    env.reset_into(Some(0), &mut obs).unwrap();
+    let action = Action::Continuous(vec![0.0; 12]);
+    let mut step = Step::default();
+    for _ in 0..5 {
+        env.step_into(&action, &mut step).unwrap();
+    }
+    let mut steps = 0usize;
+    let before = ALLOCS.load(Ordering::Relaxed);
+    for _ in 0..50 {
+        env.step_into(&action, &mut step).unwrap();
+        steps += 1;
+        if step.done() {
+            break;
+        }
+    }
+    let n = ALLOCS.load(Ordering::Relaxed) - before;
+    println!(
+        "allocations: {n} over {steps} env steps = {:.2}/env step ({:.3}/physics substep)",
+        n as f64 / steps as f64,
+        n as f64 / (steps * 33) as f64
+    );
+}
+
+/// Nanoseconds this thread has spent on a CPU (Linux schedstat), to report speed independent of
+/// how loaded the shared machine is; `None` elsewhere.
+fn thread_cpu_ns() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    s.split_whitespace().next()?.parse().ok()
+}
+
+fn cpu_time_throughput(solver_iterations: usize) {
+    let mut env = make_with(solver_iterations);
+    let mut obs = Observation::default();
+    env.reset_into(Some(0), &mut obs).unwrap();
+    let action = Action::Continuous(vec![0.0; 12]);
+    let mut step = Step::default();
+    let n = 2000;
+    let (Some(c0), w0) = (thread_cpu_ns(), std::time::Instant::now()) else {
+        return;
+    };
+    for _ in 0..n {
+        env.step_into(&action, &mut step).unwrap();
+        if step.done() {
+            env.reset_into(None, &mut obs).unwrap();
+        }
+    }
+    let cpu = (thread_cpu_ns().unwrap_or(c0) - c0) as f64 * 1e-9;
+    let wall = w0.elapsed().as_secs_f64();
+    println!(
+        "env steps (DogPace, zero actions, resets included, {solver_iterations} solver iteration(s)): {:.0} per CPU-second ({:.0} substeps/CPU-s), {:.0} per wall-second",
+        n as f64 / cpu,
+        n as f64 * 33.0 / cpu,
+        n as f64 / wall
+    );
+}
+
+fn benches(c: &mut Criterion) {
+    allocations_per_step();
+    cpu_time_throughput(2);
+    cpu_time_throughput(1);
+    let mut g = c.benchmark_group("locomotion");
+    g.sample_size(20);
+    let mut env = make();
+    let mut obs = Observation::default();
+    env.reset_into(Some(0), &mut obs).unwrap();
+    let action = Action::Continuous(vec![0.0; 12]);
+    let mut step = Step::default();
+    g.bench_function("env_step_dog_pace", |b| {
+        b.iter(|| {
+            env.step_into(black_box(&action), &mut step).unwrap();
+            if step.done() {
+                env.reset_into(None, &mut obs).unwrap();
+            }
+        })
+    });
+    g.bench_function("env_reset", |b| {
+        b.iter(|| env.reset_into(None, &mut obs).unwrap())
+    });
+    let model = RobotModel::builtin();
+    let mut sim = Simulation::new(&model, SimConfig::default());
+    let target = model.default_motor_angles();
+    g.bench_function("physics_substep_pd", |b| {
+        b.iter(|| sim.step_pd(black_box(&target)))
+    });
+    g.finish();
+}
+
+criterion_group!(group, benches);
+criterion_main!(group);

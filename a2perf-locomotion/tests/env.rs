@@ -1,0 +1,223 @@
+//! Behaviour of the imitation environment: reward check, standing check, terminations,
+//! determinism.
+
+use a2perf_core::{Action, Env, Observation, Step};
+use a2perf_locomotion::RobotModel;
+use a2perf_locomotion::env::{EnvConfig, LocomotionEnv, MotionSource, OBS_DIM, Termination};
+use a2perf_locomotion::gait::Gait;
+use nalgebra::{UnitQuaternion, Vector3};
+
+fn env(gait: Gait) -> LocomotionEnv {
+    LocomotionEnv::new(EnvConfig::new("test", MotionSource::Generated(gait))).unwrap()
+}
+
+#[test]
+fn state_equal_to_reference_scores_one_on_every_term() {
+    for g in [Gait::Pace, Gait::Trot, Gait::Spin] {
+        let mut e = env(g);
+        e.reset(Some(3)).unwrap();
+        let t = e.reference_time() + 0.2;
+        let s = e.reference_state(t);
+        e.set_robot_state(&s);
+        let r = e.reward_terms(t);
+        for (name, v) in [
+            ("pose", r.pose),
+            ("velocity", r.velocity),
+            ("end_effector", r.end_effector),
+            ("root_pose", r.root_pose),
+            ("root_velocity", r.root_velocity),
+        ] {
+            assert!((v - 1.0).abs() < 1e-4, "{g:?} {name} = {v}");
+        }
+        assert!((r.total() - 1.0).abs() < 1e-4);
+    }
+}
+
+#[test]
+fn reward_terms_drop_when_the_state_differs() {
+    let mut e = env(Gait::Pace);
+    e.reset(Some(3)).unwrap();
+    let t = e.reference_time();
+    let mut s = e.reference_state(t);
+    s.q[1] += 0.3;
+    s.base_pos.x += 0.1;
+    e.set_robot_state(&s);
+    let r = e.reward_terms(t);
+    assert!(
+        r.pose < 0.7 && r.root_pose < 0.9 && r.end_effector < 0.99,
+        "{r:?}"
+    );
+}
+
+#[test]
+fn default_pose_with_zero_actions_stays_up_for_100_steps() {
+    // Reference = standing still in the default pose, so only a fall can end the episode.
+    let clip = a2perf_locomotion::gait::standing_clip(&RobotModel::builtin());
+    let mut cfg = EnvConfig::new("stand", MotionSource::Clip(clip));
+    cfg.ref_state_init_prob = 1.0;
+    let mut e = LocomotionEnv::new(cfg).unwrap();
+    e.reset(Some(0)).unwrap();
+    let z0 = e.sim().state().base_pos.z;
+    let mut step = Step::default();
+    for i in 0..120 {
+        e.step_into(&Action::Continuous(vec![0.0; 12]), &mut step)
+            .unwrap();
+        let s = e.sim().state();
+        assert!(
+            !step.done(),
+            "episode ended at step {i}: {:?}",
+            e.last_termination()
+        );
+        assert!(
+            (s.base_pos.z - z0).abs() < 0.05,
+            "sagged at step {i}: z = {}",
+            s.base_pos.z
+        );
+        let up = s.base_rot * Vector3::z();
+        assert!(up.z > 0.99, "tipped at step {i}");
+        assert!(
+            !e.sim().ground_contacts().1,
+            "body touched the ground at step {i}"
+        );
+        assert!(
+            e.sim().toe_contacts().iter().all(|c| *c),
+            "a toe left the ground at step {i}"
+        );
+    }
+    // Standing still on the reference scores high.
+    assert!(step.reward > 0.8, "reward {}", step.reward);
+}
+
+#[test]
+fn body_contact_terminates() {
+    let mut e = env(Gait::Trot);
+    e.reset(Some(1)).unwrap();
+    let t = e.reference_time();
+    let mut s = e.reference_state(t);
+    // Drop the robot onto its belly.
+    s.base_pos.z = 0.1;
+    e.set_robot_state(&s);
+    let mut step = Step::default();
+    e.step_into(&Action::Continuous(vec![0.0; 12]), &mut step)
+        .unwrap();
+    // The first step skips the contact check, as in the reference.
+    if !step.terminated {
+        e.step_into(&Action::Continuous(vec![0.0; 12]), &mut step)
+            .unwrap();
+    }
+    assert!(step.terminated);
+    assert_eq!(e.last_termination(), Some(Termination::BodyContact));
+}
+
+#[test]
+fn root_position_and_rotation_errors_terminate() {
+    let mut e = env(Gait::Pace);
+    e.reset(Some(2)).unwrap();
+    let t = e.reference_time();
+    let mut s = e.reference_state(t);
+    s.base_pos.x += 1.1;
+    e.set_robot_state(&s);
+    assert_eq!(e.termination(t, false), Some(Termination::RootPosition));
+    let mut s = e.reference_state(t);
+    s.base_pos.x += 0.9;
+    e.set_robot_state(&s);
+    assert_eq!(e.termination(t, false), None);
+
+    let mut s = e.reference_state(t);
+    s.base_rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.7) * s.base_rot;
+    e.set_robot_state(&s);
+    assert_eq!(e.termination(t, false), Some(Termination::RootRotation));
+    let mut s = e.reference_state(t);
+    s.base_rot = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.4) * s.base_rot;
+    e.set_robot_state(&s);
+    assert_eq!(e.termination(t, false), None);
+}
+
+fn rollout(seed: u64, steps: usize) -> Vec<f32> {
+    let mut e = env(Gait::Trot);
+    let mut obs = Observation::default();
+    e.reset_into(Some(seed), &mut obs).unwrap();
+    let mut trace = obs.flat_values();
+    let mut step = Step::default();
+    for k in 0..steps {
+        let a: Vec<f32> = (0..12).map(|j| 0.1 * ((k + j) as f32).sin()).collect();
+        e.step_into(&Action::Continuous(a), &mut step).unwrap();
+        trace.extend(step.observation.flat_values());
+        trace.push(step.reward as f32);
+        if step.done() {
+            e.reset_into(None, &mut obs).unwrap();
+        }
+    }
+    trace
+}
+
+#[test]
+fn same_seed_gives_the_same_trajectory() {
+    let a = rollout(7, 30);
+    let b = rollout(7, 30);
+    assert_eq!(a, b);
+    let c = rollout(8, 30);
+    assert_ne!(a, c);
+}
+
+#[test]
+fn observation_layout_after_reset() {
+    let mut e = env(Gait::Spin);
+    let obs = e.reset(Some(4)).unwrap();
+    let t = obs.tensor("obs").unwrap();
+    assert_eq!(t.shape, vec![OBS_DIM]);
+    let d = &t.data;
+    // Reset quirk: histories show the default pose, zero IMU and zero last action.
+    assert!(d[0..12].iter().all(|v| v.abs() < 1e-6));
+    assert!(d[12..48].iter().all(|v| *v == 0.0));
+    for k in 0..3 {
+        let m = &d[48 + 12 * k..60 + 12 * k];
+        assert!(
+            (m[1] - 0.67).abs() < 1e-5 && (m[2] + 1.25).abs() < 1e-5,
+            "{m:?}"
+        );
+    }
+    // Target frames: unit quaternions with w >= 0.
+    for k in 0..4 {
+        let f = &d[84 + 19 * k..84 + 19 * (k + 1)];
+        let n: f32 = f[3..7].iter().map(|v| v * v).sum();
+        assert!((n - 1.0).abs() < 1e-4 && f[6] >= 0.0);
+    }
+    assert!(e.spec().observation_space.flat_dim() == OBS_DIM);
+}
+
+#[test]
+fn invalid_actions_are_errors() {
+    let mut e = env(Gait::Pace);
+    assert!(
+        e.step(&Action::Continuous(vec![0.0; 12])).is_err(),
+        "step before reset"
+    );
+    e.reset(Some(0)).unwrap();
+    assert!(e.step(&Action::Continuous(vec![0.0; 11])).is_err());
+    assert!(e.step(&Action::Continuous(vec![f32::NAN; 12])).is_err());
+    assert!(e.step(&Action::Discrete(0)).is_err());
+}
+
+#[test]
+fn impulse_joints_stay_together_during_a_rollout() {
+    // Default settings: 1 solver iteration per 1 ms step. Measured worst case here is ~1.8 mm
+    // (2 iterations: ~0.3 mm).
+    let mut e = env(Gait::Trot);
+    e.reset(Some(5)).unwrap();
+    assert!(e.sim().max_joint_error() < 1e-5);
+    let mut step = Step::default();
+    let mut worst = 0.0f64;
+    for k in 0..60 {
+        let a: Vec<f32> = (0..12)
+            .map(|j| 0.3 * ((k * 3 + j) as f32 * 0.7).sin())
+            .collect();
+        e.step_into(&Action::Continuous(a), &mut step).unwrap();
+        worst = worst.max(e.sim().max_joint_error());
+        if step.done() {
+            e.reset(None).unwrap();
+        }
+    }
+    assert!(worst < 2.5e-3, "joint separation {worst} m");
+    eprintln!("max joint separation over the rollout: {worst:.2e} m");
+}

@@ -1,0 +1,322 @@
+//! Real-browser tests: backend parity, restart after a crash, no orphan processes, screenshot.
+//!
+//! They SKIP (with a printed reason) when Chromium or chromedriver is missing, unless
+//! `A2PERF_REQUIRE_CHROME=1`, then a missing browser fails.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use a2perf_core::{Action, Env, Observation, RngStream, Step};
+use a2perf_web::{
+    BackendKind, ChromiumBackend, ChromiumOptions, Design, Limits, Vocabulary, WebNavConfig,
+    WebNavEnv, Website, chromium_available, generate,
+};
+
+/// Geometry tolerance of the parity test, in normalised units (≈ 0.4 px on a 375 px page).
+const GEOMETRY_TOLERANCE: f32 = 1e-3;
+
+fn chrome_or_skip() -> bool {
+    match chromium_available() {
+        Ok(()) => true,
+        Err(e) => {
+            if std::env::var("A2PERF_REQUIRE_CHROME").as_deref() == Ok("1") {
+                panic!("A2PERF_REQUIRE_CHROME=1 but {e}");
+            }
+            println!("SKIP: {e}");
+            false
+        }
+    }
+}
+
+fn pool() -> Vec<Design> {
+    let l = Limits::default();
+    (1..=3)
+        .flat_map(|level| generate(level, 7, 20, &l).into_iter().map(|g| g.design))
+        .collect()
+}
+
+fn compare(sim: &Observation, real: &Observation, ctx: &str) -> f32 {
+    assert_eq!(
+        sim.action_mask, real.action_mask,
+        "{ctx}: action masks differ"
+    );
+    let mut worst = 0.0f32;
+    for (a, b) in sim.tensors.iter().zip(&real.tensors) {
+        assert_eq!(a.name, b.name);
+        assert_eq!(a.shape, b.shape);
+        if a.name == "dom_features" {
+            for (k, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
+                if k % 8 < 4 {
+                    assert_eq!(x, y, "{ctx}: dom_features[{}][{}]", k / 8, k % 8);
+                } else {
+                    let d = (x - y).abs();
+                    worst = worst.max(d);
+                    assert!(
+                        d <= GEOMETRY_TOLERANCE,
+                        "{ctx}: geometry [{}][{}] {x} vs {y}",
+                        k / 8,
+                        k % 8
+                    );
+                }
+            }
+        } else {
+            assert_eq!(a.data, b.data, "{ctx}: tensor {} differs", a.name);
+        }
+    }
+    worst
+}
+
+fn pick_action(obs: &Observation, rng: &mut RngStream) -> usize {
+    let mask = obs.action_mask.as_ref().expect("mask");
+    let types: Vec<usize> = (0..mask.len()).filter(|&i| mask[i] && i % 2 == 1).collect();
+    let clicks: Vec<usize> = (0..mask.len()).filter(|&i| mask[i] && i % 2 == 0).collect();
+    if !types.is_empty() && rng.bernoulli(0.5) {
+        types[rng.index(types.len())]
+    } else {
+        clicks[rng.index(clicks.len())]
+    }
+}
+
+#[test]
+fn simulated_and_chromium_backends_agree() {
+    if !chrome_or_skip() {
+        return;
+    }
+    let pool = pool();
+    let mut sim = WebNavEnv::with_pool(pool.clone(), WebNavConfig::new(1), "parity-sim").unwrap();
+    let mut cfg = WebNavConfig::new(1);
+    cfg.backend = BackendKind::Chromium;
+    let mut real = WebNavEnv::with_pool(pool.clone(), cfg, "parity-chromium").unwrap();
+    let (mut so, mut ro) = (Observation::default(), Observation::default());
+    let (mut ss, mut rs) = (Step::default(), Step::default());
+    let episodes = 210;
+    let (mut steps, mut worst, mut successes, mut distractors) = (0, 0.0f32, 0, 0);
+    let t0 = Instant::now();
+    for ep in 0..episodes {
+        let index = ep % pool.len();
+        sim.reset_to_website(index, ep as u64, &mut so).unwrap();
+        real.reset_to_website(index, ep as u64, &mut ro).unwrap();
+        worst = worst.max(compare(&so, &ro, &format!("episode {ep} reset")));
+        if ep < 30 {
+            // The static attributes in the real DOM equal the model's.
+            let snap = real.chromium().unwrap().snapshot().unwrap();
+            let site = real.website();
+            assert_eq!(snap.len(), sim.dom().order.len());
+            for e in snap {
+                let node = &site.nodes[e.index];
+                assert_eq!(e.tag, node.tag.token(), "episode {ep} element {}", e.index);
+                assert_eq!(e.text, node.text, "episode {ep} element {}", e.index);
+                assert_eq!(e.placeholder, node.placeholder);
+                assert_eq!(e.classes, node.classes);
+            }
+        }
+        // Even episodes: oracle (with a random detour every few steps); odd: random actions.
+        let mut rng = RngStream::new(ep as u64, "parity-actions");
+        for t in 0..30 {
+            let a = if ep % 2 == 0 && t % 4 != 3 {
+                match sim.oracle_action() {
+                    Some(a) => a,
+                    None => break,
+                }
+            } else {
+                pick_action(&so, &mut rng)
+            };
+            sim.step_into(&Action::Discrete(a), &mut ss).unwrap();
+            real.step_into(&Action::Discrete(a), &mut rs).unwrap();
+            steps += 1;
+            let ctx = format!("episode {ep} step {t} action {a}");
+            assert_eq!(ss.reward, rs.reward, "{ctx}: reward");
+            assert_eq!(ss.terminated, rs.terminated, "{ctx}: terminated");
+            assert_eq!(ss.truncated, rs.truncated, "{ctx}: truncated");
+            assert_eq!(ss.info, rs.info, "{ctx}: info");
+            worst = worst.max(compare(&ss.observation, &rs.observation, &ctx));
+            so.copy_from(&ss.observation);
+            if ss.done() {
+                successes += usize::from(ss.info.get("success") == Some(1.0));
+                distractors += usize::from(ss.info.get("distractor") == Some(1.0));
+                break;
+            }
+        }
+    }
+    println!(
+        "parity: {episodes} episodes, {steps} steps, {successes} successes, {distractors} distractor ends, \
+         max geometry difference {worst} (tolerance {GEOMETRY_TOLERANCE}), {:.1} s",
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(successes > 50 && distractors > 10);
+    real.close().unwrap();
+}
+
+fn alive(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .map(|s| {
+            // State is the field after the parenthesised command name; zombies are dead.
+            s.rsplit(')')
+                .next()
+                .and_then(|r| r.split_whitespace().next())
+                .is_some_and(|st| st != "Z" && st != "X")
+        })
+        .unwrap_or(false)
+}
+
+fn live_with(tag: &str) -> Vec<u32> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .flatten()
+        .filter_map(|e| e.file_name().to_str().and_then(|s| s.parse::<u32>().ok()))
+        .filter(|&p| {
+            std::fs::read(format!("/proc/{p}/cmdline"))
+                .map(|c| String::from_utf8_lossy(&c).contains(tag))
+                .unwrap_or(false)
+                && alive(p)
+        })
+        .collect()
+}
+
+#[test]
+fn shutdown_leaves_no_browser_processes() {
+    if !chrome_or_skip() {
+        return;
+    }
+    let mut cfg = WebNavConfig::new(2);
+    cfg.backend = BackendKind::Chromium;
+    let mut env = WebNavEnv::new(cfg.clone()).unwrap();
+    env.reset(Some(0)).unwrap();
+    let a = env.oracle_action().unwrap();
+    env.step(&Action::Discrete(a)).unwrap();
+    let chrome = env.chromium().unwrap();
+    let pids = chrome.pids();
+    let tag = chrome.profile_tag().to_string();
+    assert!(
+        pids.len() >= 2,
+        "expected chromedriver + browser processes, got {pids:?}"
+    );
+    assert!(pids.iter().all(|&p| alive(p)));
+    env.close().unwrap();
+    let still: Vec<u32> = pids.iter().copied().filter(|&p| alive(p)).collect();
+    assert!(still.is_empty(), "alive after close: {still:?}");
+    assert!(live_with(&tag).is_empty());
+    assert!(!Path::new(&tag).exists(), "profile directory left behind");
+    // Drop without close cleans up too.
+    let mut env = WebNavEnv::new(cfg).unwrap();
+    env.reset(Some(1)).unwrap();
+    let chrome = env.chromium().unwrap();
+    let (pids, tag) = (chrome.pids(), chrome.profile_tag().to_string());
+    drop(env);
+    assert!(pids.iter().all(|&p| !alive(p)));
+    assert!(live_with(&tag).is_empty());
+}
+
+#[test]
+fn a_dead_browser_is_restarted_and_the_episode_reported_interrupted() {
+    if !chrome_or_skip() {
+        return;
+    }
+    let mut cfg = WebNavConfig::new(1);
+    cfg.backend = BackendKind::Chromium;
+    let mut env = WebNavEnv::new(cfg).unwrap();
+    env.reset(Some(5)).unwrap();
+    let chrome = env.chromium().unwrap();
+    let tag = chrome.profile_tag().to_string();
+    // Kill the browser (not chromedriver): every process started with our profile directory.
+    for pid in live_with(&tag) {
+        let _ = Command::new("kill").arg("-9").arg(pid.to_string()).status();
+    }
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while !live_with(&tag).is_empty() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let a = env.oracle_action().unwrap();
+    let step = env.step(&Action::Discrete(a)).unwrap();
+    assert!(step.truncated && !step.terminated);
+    assert_eq!(step.info.get("interrupted"), Some(1.0));
+    assert_eq!(env.browser_restarts(), 1);
+    assert!(
+        env.step(&Action::Discrete(a)).is_err(),
+        "episode must need a reset"
+    );
+    // The new browser works.
+    env.reset(Some(6)).unwrap();
+    let mut ok = false;
+    while let Some(a) = env.oracle_action() {
+        let s = env.step(&Action::Discrete(a)).unwrap();
+        if s.done() {
+            ok = s.info.get("success") == Some(1.0);
+            break;
+        }
+    }
+    assert!(ok);
+    let new_tag = env.chromium().unwrap().profile_tag().to_string();
+    env.close().unwrap();
+    assert!(live_with(&new_tag).is_empty());
+    assert!(live_with(&tag).is_empty());
+}
+
+#[test]
+fn rendered_website_screenshot_shows_the_form() {
+    if !chrome_or_skip() {
+        return;
+    }
+    let design = generate(2, 3, 1, &Limits::default()).remove(0).design;
+    let site = Website::build(
+        &design,
+        &mut RngStream::new(3, "render"),
+        Vocabulary::standard(),
+    );
+    let html = site.to_html(true);
+    let dir = tempfile::tempdir().unwrap();
+    let page = dir.path().join("site.html");
+    std::fs::write(&page, &html).unwrap();
+    let shot = dir.path().join("site.png");
+    let profile = dir.path().join("profile");
+    let opts = ChromiumOptions::from_env();
+    let mut child = Command::new(&opts.chromium)
+        .args(a2perf_web::chromium::CHROMIUM_FLAGS)
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg("--window-size=400,900")
+        .arg("--hide-scrollbars")
+        .arg(format!("file://{}", page.display()))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("chromium --screenshot did not finish in 60 s");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let png = std::fs::read(&shot).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    assert!(
+        png.len() > 5_000,
+        "screenshot suspiciously small: {} bytes",
+        png.len()
+    );
+    // DOM check through the backend: every field's control and the submit button are rendered.
+    let mut chrome = ChromiumBackend::launch(&opts).unwrap();
+    chrome.load_html(html).unwrap();
+    let snap = chrome.snapshot().unwrap();
+    for f in &site.fields {
+        for &n in &f.nodes {
+            assert!(
+                snap.iter().any(|e| e.index == n as usize),
+                "field {} not rendered",
+                f.key
+            );
+        }
+    }
+    assert!(snap.iter().any(|e| e.tag == "button"));
+    assert!(
+        snap.iter().filter(|e| e.tag.starts_with("input_")).count() >= site.fields.len().min(1)
+    );
+    chrome.shutdown();
+}
