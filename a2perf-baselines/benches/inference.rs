@@ -17,7 +17,7 @@ fn locomotion_spec() -> EnvSpec {
     EnvSpec {
         id: "Bench-Locomotion".into(),
         observation_space: Space::uniform_box(&[160], -10.0, 10.0),
-        action_space: Space::uniform_box(&[12], -6.28, 6.28),
+        action_space: Space::uniform_box(&[12], -std::f32::consts::TAU, std::f32::consts::TAU),
         max_episode_steps: None,
         metadata: BTreeMap::new(),
     }
@@ -27,7 +27,15 @@ fn locomotion(c: &mut Criterion) {
     let spec = locomotion_spec();
     let arch = GaussianArch::new(160, 12, &[512, 256], true);
     let params = arch.init_params(&mut RngStream::new(0, "bench"), -0.5);
-    let mut policy = NetPolicy::new("ppo", &spec, Head::Gaussian(arch.clone()), params.clone(), None, 0).unwrap();
+    let mut policy = NetPolicy::new(
+        "ppo",
+        &spec,
+        Head::Gaussian(arch.clone()),
+        params.clone(),
+        None,
+        0,
+    )
+    .unwrap();
     let mut rng = RngStream::new(1, "obs");
     let obs = Observation::flat((0..160).map(|_| rng.normal() as f32).collect());
     c.bench_function("inference/locomotion_mlp_160_512_256_12", |b| {
@@ -37,7 +45,9 @@ fn locomotion(c: &mut Criterion) {
     // One PPO minibatch step of the locomotion actor-critic: forward, backward, Adam (batch 64).
     let batch = 64;
     let x: Vec<f32> = (0..batch * 160).map(|_| rng.normal() as f32).collect();
-    let dmean: Vec<f32> = (0..batch * 12).map(|_| rng.normal() as f32 * 0.01).collect();
+    let dmean: Vec<f32> = (0..batch * 12)
+        .map(|_| rng.normal() as f32 * 0.01)
+        .collect();
     let dv: Vec<f32> = (0..batch).map(|_| rng.normal() as f32 * 0.01).collect();
     let mut p = params;
     let mut grads = vec![0.0; p.len()];
@@ -49,7 +59,8 @@ fn locomotion(c: &mut Criterion) {
             grads.fill(0.0);
             arch.actor.forward(&p, &x, batch, &mut wa);
             critic.forward(&p, &x, batch, &mut wc);
-            arch.actor.backward(&p, &mut grads, &x, &dmean, &mut wa, None);
+            arch.actor
+                .backward(&p, &mut grads, &x, &dmean, &mut wa, None);
             critic.backward(&p, &mut grads, &x, &dv, &mut wc, None);
             adam.step(&mut p, &grads, 3e-4);
             black_box(&p);
@@ -57,11 +68,20 @@ fn locomotion(c: &mut Criterion) {
     });
 }
 
-fn domain_policy(c: &mut Criterion, name: &str, env_id: &str, env_params: &[(&str, Value)], opts: NetOptions) {
+fn domain_policy(
+    c: &mut Criterion,
+    name: &str,
+    env_id: &str,
+    env_params: &[(&str, Value)],
+    opts: NetOptions,
+) {
     let mut reg = Registry::new();
     a2perf_web::register(&mut reg);
     a2perf_circuit::register(&mut reg);
-    let params: BTreeMap<String, Value> = env_params.iter().map(|(k, v)| (k.to_string(), v.clone())).collect();
+    let params: BTreeMap<String, Value> = env_params
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect();
     let Ok(mut env) = reg.make_env(env_id, &params) else {
         eprintln!("skipping {name}: cannot build {env_id}");
         return;
@@ -71,7 +91,11 @@ fn domain_policy(c: &mut Criterion, name: &str, env_id: &str, env_params: &[(&st
     let layout = ObsLayout::from_spec(&spec).unwrap();
     let net = DiscreteNet::for_spec(&spec, &layout, &opts, false).unwrap();
     let params = net.init_params(&mut RngStream::new(0, "bench"));
-    eprintln!("{name}: {} network, {} parameters", net.kind(), params.len());
+    eprintln!(
+        "{name}: {} network, {} parameters",
+        net.kind(),
+        params.len()
+    );
     let mut policy = NetPolicy::new("ppo", &spec, Head::Discrete(net), params, None, 0).unwrap();
     c.bench_function(&format!("inference/{name}"), |b| {
         b.iter(|| black_box(policy.act(black_box(&obs), ActMode::Greedy).unwrap()))
@@ -91,14 +115,22 @@ fn domains(c: &mut Criterion) {
         "circuit_synthetic_small",
         "CircuitTraining-Synthetic-Small-v0",
         &[],
-        NetOptions { hidden_sizes: vec![64, 64], latent_dim: 32, ..NetOptions::default() },
+        NetOptions {
+            hidden_sizes: vec![64, 64],
+            latent_dim: 32,
+            ..NetOptions::default()
+        },
     );
     domain_policy(
         c,
         "circuit_synthetic_ariane",
         "CircuitTraining-Synthetic-Ariane-v0",
         &[],
-        NetOptions { hidden_sizes: vec![64, 64], latent_dim: 32, ..NetOptions::default() },
+        NetOptions {
+            hidden_sizes: vec![64, 64],
+            latent_dim: 32,
+            ..NetOptions::default()
+        },
     );
 }
 

@@ -54,13 +54,48 @@ impl Bc {
     /// Documented hyperparameters (paper: batch 128, lr 1e-4 web / 1e-3 circuit).
     pub fn params() -> Vec<ParamSpec> {
         let mut v = vec![
-            ParamSpec::new("learning_rate", ParamKind::Float, Value::Float(1e-4), "Adam learning rate (paper: 1e-4 web, 1e-3 circuit)"),
-            ParamSpec::new("batch_size", ParamKind::Int, Value::Int(128), "minibatch size (paper: 128)"),
-            ParamSpec::new("loss", ParamKind::Choice(&["nll", "mse"]), Value::Str("nll".into()), "continuous actions: Gaussian negative log-likelihood or mean-squared error (discrete: cross-entropy)"),
-            ParamSpec::new("dataset", ParamKind::Path, Value::Null, "JSON dataset file (see `Dataset::save_json`); pipelines may supply a loader instead"),
-            ParamSpec::new("normalize_observations", ParamKind::Bool, Value::Bool(true), "normalise observations with the dataset's statistics"),
-            ParamSpec::new("max_grad_norm", ParamKind::Float, Value::Float(1.0), "global gradient-norm clipping, 0 = off"),
-            ParamSpec::new("init_log_std", ParamKind::Float, Value::Float(-0.5), "initial log-std of the Gaussian policy (continuous actions)"),
+            ParamSpec::new(
+                "learning_rate",
+                ParamKind::Float,
+                Value::Float(1e-4),
+                "Adam learning rate (paper: 1e-4 web, 1e-3 circuit)",
+            ),
+            ParamSpec::new(
+                "batch_size",
+                ParamKind::Int,
+                Value::Int(128),
+                "minibatch size (paper: 128)",
+            ),
+            ParamSpec::new(
+                "loss",
+                ParamKind::Choice(&["nll", "mse"]),
+                Value::Str("nll".into()),
+                "continuous actions: Gaussian negative log-likelihood or mean-squared error (discrete: cross-entropy)",
+            ),
+            ParamSpec::new(
+                "dataset",
+                ParamKind::Path,
+                Value::Null,
+                "JSON dataset file (see `Dataset::save_json`); pipelines may supply a loader instead",
+            ),
+            ParamSpec::new(
+                "normalize_observations",
+                ParamKind::Bool,
+                Value::Bool(true),
+                "normalise observations with the dataset's statistics",
+            ),
+            ParamSpec::new(
+                "max_grad_norm",
+                ParamKind::Float,
+                Value::Float(1.0),
+                "global gradient-norm clipping, 0 = off",
+            ),
+            ParamSpec::new(
+                "init_log_std",
+                ParamKind::Float,
+                Value::Float(-0.5),
+                "initial log-std of the Gaussian policy (continuous actions)",
+            ),
         ];
         v.extend(schedule_specs());
         v.extend(net_specs(&[64, 64]));
@@ -110,12 +145,18 @@ impl Algorithm for Bc {
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
         let cfg = self.config.clone();
         let loader = self.loader.clone().ok_or_else(|| {
-            invalid("dataset", "behavioural cloning needs demonstrations: set `dataset` to a JSON dataset file")
+            invalid(
+                "dataset",
+                "behavioural cloning needs demonstrations: set `dataset` to a JSON dataset file",
+            )
         })?;
         let spec = ctx.make_env(0)?.spec().clone();
         let data = loader.load(&spec).map_err(data_err)?;
         if data.is_empty() {
-            return Err(data_err(DatasetError::Mismatch { env: spec.id.clone(), reason: "the dataset is empty".into() }));
+            return Err(data_err(DatasetError::Mismatch {
+                env: spec.id.clone(),
+                reason: "the dataset is empty".into(),
+            }));
         }
         let layout = ObsLayout::from_spec(&spec)?;
         let head = head_for(&spec, &layout, &cfg.net, false)?;
@@ -130,18 +171,30 @@ impl Algorithm for Bc {
         let mut act_c = vec![0.0f32; data.len() * act_dim];
         for (i, s) in data.samples.iter().enumerate() {
             store.write_row(i, &s.observation)?;
-            let mismatch = |reason: String| data_err(DatasetError::Mismatch { env: spec.id.clone(), reason });
+            let mismatch = |reason: String| {
+                data_err(DatasetError::Mismatch {
+                    env: spec.id.clone(),
+                    reason,
+                })
+            };
             match (&s.action, act_dim) {
                 (Action::Discrete(a), 0) => {
                     if *a >= n_actions || !store.mask(i).is_none_or(|m| m[*a]) {
-                        return Err(mismatch(format!("sample {i}: action {a} is out of range or masked out")));
+                        return Err(mismatch(format!(
+                            "sample {i}: action {a} is out of range or masked out"
+                        )));
                     }
                     act_d[i] = *a;
                 }
                 (Action::Continuous(v), d) if v.len() == d && d > 0 => {
                     act_c[i * d..(i + 1) * d].copy_from_slice(v);
                 }
-                _ => return Err(mismatch(format!("sample {i}: action {:?} does not fit the action space", s.action))),
+                _ => {
+                    return Err(mismatch(format!(
+                        "sample {i}: action {:?} does not fit the action space",
+                        s.action
+                    )));
+                }
             }
         }
         let mut init_rng = ctx.rng("bc/init");
@@ -150,7 +203,11 @@ impl Algorithm for Bc {
             Head::Gaussian(g) => g.init_params(&mut init_rng, cfg.init_log_std),
             Head::Squashed(_) => return Err(RunError::Unsupported("squashed head".into())),
         };
-        let mut obs_norm = if cfg.normalize_observations { ObsNorm::for_head(&head, &layout) } else { None };
+        let mut obs_norm = if cfg.normalize_observations {
+            ObsNorm::for_head(&head, &layout)
+        } else {
+            None
+        };
         if let Some(n) = &mut obs_norm {
             n.update(&store, data.len());
             for i in 0..data.len() {
@@ -163,7 +220,8 @@ impl Algorithm for Bc {
         let mut rng = ctx.rng("bc/minibatch");
         let mut mb = ObsBatch::new(&layout);
         let mut idx: Vec<usize> = Vec::new();
-        let (mut x, mut ws, mut dl, mut lp) = (Vec::new(), MlpWs::default(), Vec::new(), Vec::new());
+        let (mut x, mut ws, mut dl, mut lp) =
+            (Vec::new(), MlpWs::default(), Vec::new(), Vec::new());
         let mut dlog_std = vec![0.0f32; act_dim];
         let total = ctx.settings().total_env_steps.max(1);
         let mut samples = 0u64;
@@ -182,9 +240,18 @@ impl Algorithm for Bc {
                     ensure(&mut lp, n_actions);
                     for (k, &r) in idx.iter().enumerate() {
                         let l = &mut lp[..n_actions];
-                        masked::log_softmax(&net.logits()[k * n_actions..(k + 1) * n_actions], mb.mask(k), l);
+                        masked::log_softmax(
+                            &net.logits()[k * n_actions..(k + 1) * n_actions],
+                            mb.mask(k),
+                            l,
+                        );
                         // Cross-entropy: −log p(a).
-                        masked::grad_logp(l, act_d[r], -inv, &mut dl[k * n_actions..(k + 1) * n_actions]);
+                        masked::grad_logp(
+                            l,
+                            act_d[r],
+                            -inv,
+                            &mut dl[k * n_actions..(k + 1) * n_actions],
+                        );
                     }
                     net.backward(&policy.params, &mut grads, &mb, &dl, None);
                 }
@@ -207,7 +274,8 @@ impl Algorithm for Bc {
                             }
                         }
                     }
-                    g.actor.backward(&policy.params, &mut grads, &x, &dl, &mut ws, None);
+                    g.actor
+                        .backward(&policy.params, &mut grads, &x, &dl, &mut ws, None);
                     for (j, v) in dlog_std.iter().enumerate() {
                         grads[g.log_std + j] += v;
                     }
@@ -215,7 +283,11 @@ impl Algorithm for Bc {
                 Head::Squashed(_) => {}
             }
             clip_grad_norm(&mut grads, cfg.max_grad_norm);
-            adam.step(&mut policy.params, &grads, cfg.lr.at(samples as f64 / total as f64));
+            adam.step(
+                &mut policy.params,
+                &grads,
+                cfg.lr.at(samples as f64 / total as f64),
+            );
             samples += b as u64;
             if adam.steps().is_multiple_of(100) {
                 check_finite("BC parameters", &policy.params)?;

@@ -93,10 +93,19 @@ pub(crate) fn net_options(p: &Params) -> Result<NetOptions, RunError> {
     let hidden: Vec<usize> = match p.get("hidden_sizes") {
         Some(Value::List(items)) => items
             .iter()
-            .map(|v| v.as_i64().and_then(|i| usize::try_from(i).ok()).filter(|i| *i > 0))
+            .map(|v| {
+                v.as_i64()
+                    .and_then(|i| usize::try_from(i).ok())
+                    .filter(|i| *i > 0)
+            })
             .collect::<Option<Vec<_>>>()
             .ok_or_else(|| invalid("hidden_sizes", "must be a list of positive integers"))?,
-        _ => return Err(invalid("hidden_sizes", "must be a list of positive integers")),
+        _ => {
+            return Err(invalid(
+                "hidden_sizes",
+                "must be a list of positive integers",
+            ));
+        }
     };
     if hidden.is_empty() {
         return Err(invalid("hidden_sizes", "needs at least one layer"));

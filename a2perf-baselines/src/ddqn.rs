@@ -61,19 +61,79 @@ impl Ddqn {
     /// paper's replay of 1e7 transitions is not a sensible in-memory default, see `replay_capacity`).
     pub fn params() -> Vec<ParamSpec> {
         let mut v = vec![
-            ParamSpec::new("learning_rate", ParamKind::Float, Value::Float(4e-5), "Adam learning rate (paper: 4e-5)"),
-            ParamSpec::new("batch_size", ParamKind::Int, Value::Int(256), "minibatch size (paper: 256)"),
-            ParamSpec::new("replay_capacity", ParamKind::Int, Value::Int(100_000), "replay buffer capacity in transitions (paper: 1e7 with Reverb; memory is capacity × 2 × observation size floats)"),
+            ParamSpec::new(
+                "learning_rate",
+                ParamKind::Float,
+                Value::Float(4e-5),
+                "Adam learning rate (paper: 4e-5)",
+            ),
+            ParamSpec::new(
+                "batch_size",
+                ParamKind::Int,
+                Value::Int(256),
+                "minibatch size (paper: 256)",
+            ),
+            ParamSpec::new(
+                "replay_capacity",
+                ParamKind::Int,
+                Value::Int(100_000),
+                "replay buffer capacity in transitions (paper: 1e7 with Reverb; memory is capacity × 2 × observation size floats)",
+            ),
             ParamSpec::new("gamma", ParamKind::Float, Value::Float(0.99), "discount"),
-            ParamSpec::new("epsilon_start", ParamKind::Float, Value::Float(1.0), "initial exploration rate"),
-            ParamSpec::new("epsilon_greedy", ParamKind::Float, Value::Float(0.3), "final exploration rate (paper: 0.3, constant)"),
-            ParamSpec::new("epsilon_decay_fraction", ParamKind::Float, Value::Float(0.1), "fraction of the budget over which epsilon decays linearly (0 = constant epsilon_greedy)"),
-            ParamSpec::new("learning_starts", ParamKind::Int, Value::Int(1000), "transitions collected before the first update"),
-            ParamSpec::new("updates_per_step", ParamKind::Float, Value::Float(0.25), "gradient updates per environment step"),
-            ParamSpec::new("target_tau", ParamKind::Float, Value::Float(1.0), "target update: Polyak coefficient (1 = hard copy)"),
-            ParamSpec::new("target_update_period", ParamKind::Int, Value::Int(250), "gradient updates between target updates"),
-            ParamSpec::new("td_loss", ParamKind::Choice(&["squared", "huber"]), Value::Str("squared".into()), "TD loss (paper: squared)"),
-            ParamSpec::new("max_grad_norm", ParamKind::Float, Value::Float(10.0), "global gradient-norm clipping, 0 = off"),
+            ParamSpec::new(
+                "epsilon_start",
+                ParamKind::Float,
+                Value::Float(1.0),
+                "initial exploration rate",
+            ),
+            ParamSpec::new(
+                "epsilon_greedy",
+                ParamKind::Float,
+                Value::Float(0.3),
+                "final exploration rate (paper: 0.3, constant)",
+            ),
+            ParamSpec::new(
+                "epsilon_decay_fraction",
+                ParamKind::Float,
+                Value::Float(0.1),
+                "fraction of the budget over which epsilon decays linearly (0 = constant epsilon_greedy)",
+            ),
+            ParamSpec::new(
+                "learning_starts",
+                ParamKind::Int,
+                Value::Int(1000),
+                "transitions collected before the first update",
+            ),
+            ParamSpec::new(
+                "updates_per_step",
+                ParamKind::Float,
+                Value::Float(0.25),
+                "gradient updates per environment step",
+            ),
+            ParamSpec::new(
+                "target_tau",
+                ParamKind::Float,
+                Value::Float(1.0),
+                "target update: Polyak coefficient (1 = hard copy)",
+            ),
+            ParamSpec::new(
+                "target_update_period",
+                ParamKind::Int,
+                Value::Int(250),
+                "gradient updates between target updates",
+            ),
+            ParamSpec::new(
+                "td_loss",
+                ParamKind::Choice(&["squared", "huber"]),
+                Value::Str("squared".into()),
+                "TD loss (paper: squared)",
+            ),
+            ParamSpec::new(
+                "max_grad_norm",
+                ParamKind::Float,
+                Value::Float(10.0),
+                "global gradient-norm clipping, 0 = off",
+            ),
         ];
         v.extend(schedule_specs());
         v.extend(net_specs(&[64, 64]));
@@ -123,7 +183,8 @@ impl Algorithm for Ddqn {
         let params = net.init_params(&mut ctx.rng("ddqn/init"));
         let mut target_params = params.clone();
         let mut target_net = net.clone();
-        let mut policy = NetPolicy::new("ddqn", &spec, Head::Discrete(net), params, None, ctx.seed())?;
+        let mut policy =
+            NetPolicy::new("ddqn", &spec, Head::Discrete(net), params, None, ctx.seed())?;
         policy.explore_epsilon = cfg.epsilon_greedy;
         let n = layout.num_actions.unwrap_or(0);
         let mut replay = ReplayBuffer::new(&layout, cfg.replay_capacity, 0);
@@ -162,7 +223,8 @@ impl Algorithm for Ddqn {
                     let a = if rng.uniform() < f64::from(eps) {
                         spec.action_space.sample(&mut rng, mask)
                     } else {
-                        masked::argmax(&net.logits()[i * n..(i + 1) * n], mask).map(Action::Discrete)
+                        masked::argmax(&net.logits()[i * n..(i + 1) * n], mask)
+                            .map(Action::Discrete)
                     };
                     *slot = a.ok_or(RunError::Policy(PolicyError::NoLegalAction))?;
                 }
@@ -178,7 +240,15 @@ impl Algorithm for Ddqn {
                     Action::Discrete(a) => a,
                     Action::Continuous(_) => 0,
                 };
-                replay.push_rows(&cur, i, next, a, &[], out.step.reward as f32, out.step.terminated)?;
+                replay.push_rows(
+                    &cur,
+                    i,
+                    next,
+                    a,
+                    &[],
+                    out.step.reward as f32,
+                    out.step.terminated,
+                )?;
             }
             for (i, out) in outs.iter().enumerate() {
                 cur.write_row(i, &out.step.observation)?;
@@ -190,7 +260,9 @@ impl Algorithm for Ddqn {
                 let lr = cfg.lr.at(env_steps as f64 / total as f64);
                 while update_credit >= 1.0 {
                     update_credit -= 1.0;
-                    let Head::Discrete(net) = &mut policy.head else { break };
+                    let Head::Discrete(net) = &mut policy.head else {
+                        break;
+                    };
                     replay.sample(cfg.batch_size, &mut sample_rng, &mut idx, &mut sample);
                     let b = sample.obs.len();
                     // Double-Q target: online argmax, target evaluation.
@@ -218,7 +290,11 @@ impl Algorithm for Ddqn {
                     for k in 0..b {
                         let a = sample.act_d[k];
                         let err = net.logits()[k * n + a] - targets[k];
-                        let g = if cfg.huber { err.clamp(-1.0, 1.0) } else { 2.0 * err };
+                        let g = if cfg.huber {
+                            err.clamp(-1.0, 1.0)
+                        } else {
+                            2.0 * err
+                        };
                         dq[k * n + a] = g / b as f32;
                     }
                     grads.fill(0.0);

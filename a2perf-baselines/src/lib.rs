@@ -65,7 +65,8 @@ fn loader_for(name: &'static str) -> a2perf_core::PolicyLoader {
 pub fn register(reg: &mut Registry) {
     reg.register_algorithm(AlgorithmEntry {
         name: "ppo".into(),
-        summary: "Proximal Policy Optimisation (clipped), masked discrete or Gaussian actions".into(),
+        summary: "Proximal Policy Optimisation (clipped), masked discrete or Gaussian actions"
+            .into(),
         params: Ppo::params(),
         make: Arc::new(|p| Ok(Box::new(Ppo::from_params(p)?))),
         load_policy: loader_for("ppo"),

@@ -148,14 +148,24 @@ impl DiscreteNet {
         };
         let mut alloc = ParamAlloc::new();
         let auto = opts.architecture == "auto";
-        let arch = if let (true, Some(a)) = (auto, web_arch(spec, layout, opts, n, with_value, &mut alloc)) {
+        let arch = if let (true, Some(a)) = (
+            auto,
+            web_arch(spec, layout, opts, n, with_value, &mut alloc),
+        ) {
             a
-        } else if let (true, Some(a)) = (auto, circuit_arch(layout, opts, n, with_value, &mut alloc)) {
+        } else if let (true, Some(a)) =
+            (auto, circuit_arch(layout, opts, n, with_value, &mut alloc))
+        {
             a
         } else {
             alloc = ParamAlloc::new();
-            let (policy, value) =
-                flat_mlps(&mut alloc, layout.total_dim(), &opts.hidden_sizes, n, with_value);
+            let (policy, value) = flat_mlps(
+                &mut alloc,
+                layout.total_dim(),
+                &opts.hidden_sizes,
+                n,
+                with_value,
+            );
             DiscreteArch::Flat { policy, value }
         };
         Ok(Self::from_arch(arch, n, alloc.len()))
@@ -286,7 +296,9 @@ impl DiscreteNet {
                     v.backward(params, grads, &ws.x, &dv[..b], &mut ws.b, None);
                 }
             }
-            DiscreteArch::Circuit(c) => circuit_backward(c, params, grads, batch, ws, dlogits, dvalues),
+            DiscreteArch::Circuit(c) => {
+                circuit_backward(c, params, grads, batch, ws, dlogits, dvalues)
+            }
             DiscreteArch::Web(w) => web_backward(w, params, grads, batch, ws, dlogits, dvalues),
         }
     }
@@ -332,7 +344,9 @@ fn circuit_arch(
 fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws) {
     let b = batch.len();
     let (nc, ch, k) = (c.cells, c.channels, c.cell_in.out);
-    let g = c.global.forward(params, batch.tensor(c.features), b, &mut ws.a);
+    let g = c
+        .global
+        .forward(params, batch.tensor(c.features), b, &mut ws.a);
     let [gc, cx, h, ..] = &mut ws.v;
     ensure(gc, b * k);
     c.global_to_cell.forward(params, g, b, gc);
@@ -378,7 +392,8 @@ fn circuit_backward(
     let h_dim = c.global.out();
     let [_gc, cx, h, dh, dgc, dg, dg2, ..] = &mut ws.v;
     ensure(dh, b * nc * k);
-    c.score.backward(params, grads, h, dlogits, b * nc, Some(dh));
+    c.score
+        .backward(params, grads, h, dlogits, b * nc, Some(dh));
     ensure(dgc, b * k);
     dgc[..b * k].fill(0.0);
     for r in 0..b {
@@ -399,7 +414,8 @@ fn circuit_backward(
     c.cell_in.backward(params, grads, cx, dh, b * nc, None);
     ensure(dg, b * h_dim);
     let g = c.global.output(&ws.a);
-    c.global_to_cell.backward(params, grads, g, dgc, b, Some(dg));
+    c.global_to_cell
+        .backward(params, grads, g, dgc, b, Some(dg));
     if let (Some(v), Some(dv)) = (&c.value, dvalues) {
         ensure(dg2, b * h_dim);
         v.backward(params, grads, g, &dv[..b], &mut ws.c, Some(dg2));
@@ -514,7 +530,8 @@ fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws) {
     for (i, &(r, e)) in ws.active_e.iter().enumerate() {
         let at = (r * ne + e) * na * t;
         let o = &mut ein[i * ein_w..(i + 1) * ein_w];
-        w.embed.pool(params, &dt[at..at + na * t], t, &mut o[..na * d]);
+        w.embed
+            .pool(params, &dt[at..at + na * t], t, &mut o[..na * d]);
         let fa = (r * ne + e) * w.dom_feats;
         o[na * d..].copy_from_slice(&df[fa..fa + w.dom_feats]);
     }
@@ -601,7 +618,9 @@ fn web_value_input(w: &WebArch, ws: &mut Ws, b: usize) {
     }
     for r in 0..b {
         let (ce, cf) = (cnt[r * 2].max(1.0), cnt[r * 2 + 1].max(1.0));
-        vx[r * 2 * l..r * 2 * l + l].iter_mut().for_each(|x| *x /= ce);
+        vx[r * 2 * l..r * 2 * l + l]
+            .iter_mut()
+            .for_each(|x| *x /= ce);
         vx[r * 2 * l + l..(r + 1) * 2 * l]
             .iter_mut()
             .for_each(|x| *x /= cf);
@@ -691,8 +710,14 @@ fn web_backward(
     }
     // Field MLP and embeddings.
     ensure(fd, caf * 2 * d);
-    w.field_mlp
-        .backward(params, grads, fin, dfe, &mut ws.a, Some(&mut fd[..caf * 2 * d]));
+    w.field_mlp.backward(
+        params,
+        grads,
+        fin,
+        dfe,
+        &mut ws.a,
+        Some(&mut fd[..caf * 2 * d]),
+    );
     let pk = batch.tensor(w.idx[0]);
     let pv = batch.tensor(w.idx[1]);
     for (i, &(r, f)) in ws.active_f.iter().enumerate() {
@@ -713,13 +738,23 @@ fn web_backward(
         *a += x;
     }
     ensure(ed, cae * ein_w);
-    w.elem_mlp
-        .backward(params, grads, ein, dfe, &mut ws.b, Some(&mut ed[..cae * ein_w]));
+    w.elem_mlp.backward(
+        params,
+        grads,
+        ein,
+        dfe,
+        &mut ws.b,
+        Some(&mut ed[..cae * ein_w]),
+    );
     let dt = batch.tensor(w.idx[3]);
     for (i, &(r, e)) in ws.active_e.iter().enumerate() {
         let at = (r * ne + e) * na * t;
-        w.embed
-            .pool_backward(grads, &dt[at..at + na * t], t, &ed[i * ein_w..i * ein_w + na * d]);
+        w.embed.pool_backward(
+            grads,
+            &dt[at..at + na * t],
+            t,
+            &ed[i * ein_w..i * ein_w + na * d],
+        );
     }
     ws.x = dfd;
 }

@@ -82,7 +82,10 @@ impl ObsNorm {
         if tensors.is_empty() {
             return None;
         }
-        let stats = tensors.iter().map(|&i| RunningNorm::new(layout.dim(i))).collect();
+        let stats = tensors
+            .iter()
+            .map(|&i| RunningNorm::new(layout.dim(i)))
+            .collect();
         Some(Self { tensors, stats })
     }
 
@@ -320,7 +323,9 @@ impl NetPolicy {
         }
         let mut r = Reader(&ckpt.payload);
         if r.take(4)? != MAGIC {
-            return Err(bad("payload is not an a2perf-baselines network (bad magic)".into()));
+            return Err(bad(
+                "payload is not an a2perf-baselines network (bad magic)".into(),
+            ));
         }
         let version = r.u32()?;
         if version != PAYLOAD_VERSION {
@@ -372,7 +377,11 @@ impl NetPolicy {
                 "{count} parameters stored, the network needs {expected}"
             )));
         }
-        let raw = r.take(expected.checked_mul(4).ok_or_else(|| bad("too many parameters".into()))?)?;
+        let raw = r.take(
+            expected
+                .checked_mul(4)
+                .ok_or_else(|| bad("too many parameters".into()))?,
+        )?;
         let params: Vec<f32> = raw
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
@@ -386,7 +395,9 @@ impl NetPolicy {
             let mut stats = Vec::new();
             for (&t, &d) in header.norm_tensors.iter().zip(&header.norm_dims) {
                 if t >= layout.tensors.len() || layout.dim(t) != d {
-                    return Err(bad(format!("normalisation of tensor {t} has the wrong size")));
+                    return Err(bad(format!(
+                        "normalisation of tensor {t} has the wrong size"
+                    )));
                 }
                 let mut s = RunningNorm::new(d);
                 s.clip = header.norm_clip;
@@ -402,7 +413,10 @@ impl NetPolicy {
             })
         };
         if !r.0.is_empty() {
-            return Err(bad(format!("{} trailing bytes after the payload", r.0.len())));
+            return Err(bad(format!(
+                "{} trailing bytes after the payload",
+                r.0.len()
+            )));
         }
         if params.iter().any(|p| !p.is_finite()) {
             return Err(bad("parameters contain non-finite values".into()));

@@ -67,19 +67,84 @@ impl Ppo {
     /// observation and reward normalisation; learning rates differ per domain in the configs).
     pub fn params() -> Vec<ParamSpec> {
         let mut v = vec![
-            ParamSpec::new("learning_rate", ParamKind::Float, Value::Float(3e-4), "Adam learning rate (Adam eps is 1e-5)"),
-            ParamSpec::new("num_steps", ParamKind::Int, Value::Int(128), "rollout length per environment between updates"),
-            ParamSpec::new("num_epochs", ParamKind::Int, Value::Int(4), "passes over each rollout (paper: 4)"),
-            ParamSpec::new("minibatch_size", ParamKind::Int, Value::Int(64), "minibatch size (paper: 64)"),
-            ParamSpec::new("gamma", ParamKind::Float, Value::Float(0.99), "discount (paper circuit: 1.0)"),
-            ParamSpec::new("gae_lambda", ParamKind::Float, Value::Float(0.95), "GAE lambda (1.0 = Monte-Carlo returns, the paper's circuit `use_gae=False`)"),
-            ParamSpec::new("clip_ratio", ParamKind::Float, Value::Float(0.2), "importance-ratio clipping (paper: 0.2)"),
-            ParamSpec::new("value_coef", ParamKind::Float, Value::Float(0.5), "value loss coefficient (paper: 0.5)"),
-            ParamSpec::new("entropy_coef", ParamKind::Float, Value::Float(0.01), "entropy bonus (paper: 1e-2)"),
-            ParamSpec::new("max_grad_norm", ParamKind::Float, Value::Float(1.0), "global gradient-norm clipping, 0 = off (paper circuit: 1.0)"),
-            ParamSpec::new("normalize_observations", ParamKind::Bool, Value::Bool(true), "running observation normalisation (paper: true)"),
-            ParamSpec::new("normalize_rewards", ParamKind::Bool, Value::Bool(true), "reward scaling by the return's running std (paper: true)"),
-            ParamSpec::new("init_log_std", ParamKind::Float, Value::Float(-0.5), "initial log standard deviation of the Gaussian policy (continuous actions)"),
+            ParamSpec::new(
+                "learning_rate",
+                ParamKind::Float,
+                Value::Float(3e-4),
+                "Adam learning rate (Adam eps is 1e-5)",
+            ),
+            ParamSpec::new(
+                "num_steps",
+                ParamKind::Int,
+                Value::Int(128),
+                "rollout length per environment between updates",
+            ),
+            ParamSpec::new(
+                "num_epochs",
+                ParamKind::Int,
+                Value::Int(4),
+                "passes over each rollout (paper: 4)",
+            ),
+            ParamSpec::new(
+                "minibatch_size",
+                ParamKind::Int,
+                Value::Int(64),
+                "minibatch size (paper: 64)",
+            ),
+            ParamSpec::new(
+                "gamma",
+                ParamKind::Float,
+                Value::Float(0.99),
+                "discount (paper circuit: 1.0)",
+            ),
+            ParamSpec::new(
+                "gae_lambda",
+                ParamKind::Float,
+                Value::Float(0.95),
+                "GAE lambda (1.0 = Monte-Carlo returns, the paper's circuit `use_gae=False`)",
+            ),
+            ParamSpec::new(
+                "clip_ratio",
+                ParamKind::Float,
+                Value::Float(0.2),
+                "importance-ratio clipping (paper: 0.2)",
+            ),
+            ParamSpec::new(
+                "value_coef",
+                ParamKind::Float,
+                Value::Float(0.5),
+                "value loss coefficient (paper: 0.5)",
+            ),
+            ParamSpec::new(
+                "entropy_coef",
+                ParamKind::Float,
+                Value::Float(0.01),
+                "entropy bonus (paper: 1e-2)",
+            ),
+            ParamSpec::new(
+                "max_grad_norm",
+                ParamKind::Float,
+                Value::Float(1.0),
+                "global gradient-norm clipping, 0 = off (paper circuit: 1.0)",
+            ),
+            ParamSpec::new(
+                "normalize_observations",
+                ParamKind::Bool,
+                Value::Bool(true),
+                "running observation normalisation (paper: true)",
+            ),
+            ParamSpec::new(
+                "normalize_rewards",
+                ParamKind::Bool,
+                Value::Bool(true),
+                "reward scaling by the return's running std (paper: true)",
+            ),
+            ParamSpec::new(
+                "init_log_std",
+                ParamKind::Float,
+                Value::Float(-0.5),
+                "initial log standard deviation of the Gaussian policy (continuous actions)",
+            ),
         ];
         v.extend(schedule_specs());
         v.extend(net_specs(&[64, 64]));
@@ -151,7 +216,10 @@ impl Forward {
     fn value(&self, policy: &NetPolicy, row: usize) -> f32 {
         match &policy.head {
             Head::Discrete(net) => net.values()[row],
-            Head::Gaussian(g) => g.critic.as_ref().map_or(0.0, |c| c.output(&self.critic)[row]),
+            Head::Gaussian(g) => g
+                .critic
+                .as_ref()
+                .map_or(0.0, |c| c.output(&self.critic)[row]),
             Head::Squashed(_) => 0.0,
         }
     }
@@ -255,11 +323,12 @@ impl Algorithm for Ppo {
                             ensure(&mut fw.logp, n_actions);
                             let lp = &mut fw.logp[..n_actions];
                             if !masked::log_softmax(logits, now.mask(i), lp) {
-                                return Err(RunError::Policy(a2perf_core::PolicyError::NoLegalAction));
+                                return Err(RunError::Policy(
+                                    a2perf_core::PolicyError::NoLegalAction,
+                                ));
                             }
-                            let a = masked::sample(lp, &mut rng).ok_or(RunError::Policy(
-                                a2perf_core::PolicyError::NoLegalAction,
-                            ))?;
+                            let a = masked::sample(lp, &mut rng)
+                                .ok_or(RunError::Policy(a2perf_core::PolicyError::NoLegalAction))?;
                             ro.act_d[row] = a;
                             ro.logp[row] = lp[a];
                             actions[i] = Action::Discrete(a);
@@ -324,8 +393,8 @@ impl Algorithm for Ppo {
                 for i in 0..n_env {
                     let row = t * n_env + i;
                     let nonterminal = if ro.ended[row] { 0.0 } else { 1.0 };
-                    let delta = ro.rewards[row] + cfg.gamma * next_val[i] * nonterminal
-                        - ro.values[row];
+                    let delta =
+                        ro.rewards[row] + cfg.gamma * next_val[i] * nonterminal - ro.values[row];
                     let a = delta + cfg.gamma * cfg.gae_lambda * nonterminal * next_adv[i];
                     ro.adv[row] = a;
                     ro.ret[row] = a + ro.values[row];
@@ -369,7 +438,8 @@ impl Algorithm for Ppo {
                     // ∂L/∂logπ(a) of the clipped surrogate −min(ρA, clip(ρ)A).
                     let surrogate = |logp_new: f32, logp_old: f32, a: f32| {
                         let ratio = (logp_new - logp_old).exp();
-                        let active = (a > 0.0 && ratio < 1.0 + clip) || (a < 0.0 && ratio > 1.0 - clip);
+                        let active =
+                            (a > 0.0 && ratio < 1.0 + clip) || (a < 0.0 && ratio > 1.0 - clip);
                         if active { -a * ratio } else { 0.0 }
                     };
                     match &mut policy.head {
@@ -406,9 +476,23 @@ impl Algorithm for Ppo {
                             for d in &mut dlog_std {
                                 *d -= cfg.entropy_coef;
                             }
-                            g.actor.backward(&policy.params, &mut grads, &fw.x, &dmean, &mut fw.actor, None);
+                            g.actor.backward(
+                                &policy.params,
+                                &mut grads,
+                                &fw.x,
+                                &dmean,
+                                &mut fw.actor,
+                                None,
+                            );
                             if let Some(c) = &g.critic {
-                                c.backward(&policy.params, &mut grads, &fw.x, &dvalues, &mut fw.critic, None);
+                                c.backward(
+                                    &policy.params,
+                                    &mut grads,
+                                    &fw.x,
+                                    &dvalues,
+                                    &mut fw.critic,
+                                    None,
+                                );
                             }
                             for (k, d) in dlog_std.iter().enumerate() {
                                 grads[g.log_std + k] += d;
@@ -440,7 +524,11 @@ pub(crate) fn clip_action(space: &a2perf_core::Space, a: &[f32], slot: &mut Acti
     v.clear();
     match space {
         a2perf_core::Space::Box { low, high, .. } => {
-            v.extend(a.iter().zip(low.iter().zip(high)).map(|(x, (l, h))| x.clamp(*l, *h)));
+            v.extend(
+                a.iter()
+                    .zip(low.iter().zip(high))
+                    .map(|(x, (l, h))| x.clamp(*l, *h)),
+            );
         }
         _ => v.extend_from_slice(a),
     }

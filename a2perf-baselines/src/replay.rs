@@ -110,7 +110,13 @@ impl ReplayBuffer {
     }
 
     /// Draws `n` transitions uniformly (with replacement) into `out`.
-    pub fn sample(&self, n: usize, rng: &mut RngStream, idx: &mut Vec<usize>, out: &mut ReplaySample) {
+    pub fn sample(
+        &self,
+        n: usize,
+        rng: &mut RngStream,
+        idx: &mut Vec<usize>,
+        out: &mut ReplaySample,
+    ) {
         idx.clear();
         idx.extend((0..n).map(|_| rng.index(self.size)));
         out.obs.gather(&self.obs, idx);

@@ -55,16 +55,66 @@ impl Sac {
     /// period 1, networks 512-256; replay 2e6 in the paper).
     pub fn params() -> Vec<ParamSpec> {
         let mut v = vec![
-            ParamSpec::new("learning_rate", ParamKind::Float, Value::Float(3e-4), "Adam learning rate for actor, critics and temperature (paper: 3e-4)"),
-            ParamSpec::new("batch_size", ParamKind::Int, Value::Int(256), "minibatch size (paper: 256)"),
-            ParamSpec::new("replay_capacity", ParamKind::Int, Value::Int(1_000_000), "replay capacity in transitions (paper: 2e6)"),
-            ParamSpec::new("gamma", ParamKind::Float, Value::Float(0.99), "discount (paper: 0.99)"),
-            ParamSpec::new("tau", ParamKind::Float, Value::Float(0.005), "target smoothing coefficient (paper: 0.005, period 1)"),
-            ParamSpec::new("learning_starts", ParamKind::Int, Value::Int(1000), "uniformly random steps before learning starts"),
-            ParamSpec::new("updates_per_step", ParamKind::Float, Value::Float(1.0), "gradient updates per environment step"),
-            ParamSpec::new("init_alpha", ParamKind::Float, Value::Float(1.0), "initial entropy temperature (tuned automatically towards entropy −|A|)"),
-            ParamSpec::new("max_grad_norm", ParamKind::Float, Value::Float(0.0), "global gradient-norm clipping, 0 = off"),
-            ParamSpec::new("action_limit", ParamKind::Float, Value::Float(0.0), "squash actions into centre ± action_limit instead of the full bounds, 0 = full bounds (locomotion's ±2π pose offsets are far wider than useful)"),
+            ParamSpec::new(
+                "learning_rate",
+                ParamKind::Float,
+                Value::Float(3e-4),
+                "Adam learning rate for actor, critics and temperature (paper: 3e-4)",
+            ),
+            ParamSpec::new(
+                "batch_size",
+                ParamKind::Int,
+                Value::Int(256),
+                "minibatch size (paper: 256)",
+            ),
+            ParamSpec::new(
+                "replay_capacity",
+                ParamKind::Int,
+                Value::Int(1_000_000),
+                "replay capacity in transitions (paper: 2e6)",
+            ),
+            ParamSpec::new(
+                "gamma",
+                ParamKind::Float,
+                Value::Float(0.99),
+                "discount (paper: 0.99)",
+            ),
+            ParamSpec::new(
+                "tau",
+                ParamKind::Float,
+                Value::Float(0.005),
+                "target smoothing coefficient (paper: 0.005, period 1)",
+            ),
+            ParamSpec::new(
+                "learning_starts",
+                ParamKind::Int,
+                Value::Int(1000),
+                "uniformly random steps before learning starts",
+            ),
+            ParamSpec::new(
+                "updates_per_step",
+                ParamKind::Float,
+                Value::Float(1.0),
+                "gradient updates per environment step",
+            ),
+            ParamSpec::new(
+                "init_alpha",
+                ParamKind::Float,
+                Value::Float(1.0),
+                "initial entropy temperature (tuned automatically towards entropy −|A|)",
+            ),
+            ParamSpec::new(
+                "max_grad_norm",
+                ParamKind::Float,
+                Value::Float(0.0),
+                "global gradient-norm clipping, 0 = off",
+            ),
+            ParamSpec::new(
+                "action_limit",
+                ParamKind::Float,
+                Value::Float(0.0),
+                "squash actions into centre ± action_limit instead of the full bounds, 0 = full bounds (locomotion's ±2π pose offsets are far wider than useful)",
+            ),
         ];
         v.extend(schedule_specs());
         v.extend(
@@ -81,11 +131,25 @@ impl Sac {
         let hidden = match p.get("hidden_sizes") {
             Some(Value::List(items)) => items
                 .iter()
-                .map(|v| v.as_i64().and_then(|i| usize::try_from(i).ok()).filter(|i| *i > 0))
+                .map(|v| {
+                    v.as_i64()
+                        .and_then(|i| usize::try_from(i).ok())
+                        .filter(|i| *i > 0)
+                })
                 .collect::<Option<Vec<_>>>()
                 .filter(|h| !h.is_empty())
-                .ok_or_else(|| invalid("hidden_sizes", "must be a non-empty list of positive integers"))?,
-            _ => return Err(invalid("hidden_sizes", "must be a list of positive integers")),
+                .ok_or_else(|| {
+                    invalid(
+                        "hidden_sizes",
+                        "must be a non-empty list of positive integers",
+                    )
+                })?,
+            _ => {
+                return Err(invalid(
+                    "hidden_sizes",
+                    "must be a list of positive integers",
+                ));
+            }
         };
         Ok(Self {
             config: SacConfig {
@@ -161,7 +225,14 @@ impl Algorithm for Sac {
             })
             .collect();
         let actor = arch.actor.clone();
-        let mut policy = NetPolicy::new("sac", &spec, Head::Squashed(arch), actor_params, None, ctx.seed())?;
+        let mut policy = NetPolicy::new(
+            "sac",
+            &spec,
+            Head::Squashed(arch),
+            actor_params,
+            None,
+            ctx.seed(),
+        )?;
         policy.action_limit = cfg.action_limit;
         let mut actor_adam = Adam::new(policy.params.len());
         let mut actor_grads = vec![0.0f32; policy.params.len()];
@@ -180,7 +251,8 @@ impl Algorithm for Sac {
         let mut a_norm = vec![0.0f32; n_env * d];
         let mut ws_actor = MlpWs::default();
         let (mut x, mut xn) = (Vec::new(), Vec::new());
-        let (mut qin, mut eps, mut a_pi, mut logp) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut qin, mut eps, mut a_pi, mut logp) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let (mut y, mut dq, mut dqin, mut dout, mut scratch) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let (low, high) = match &spec.action_space {
@@ -210,20 +282,38 @@ impl Algorithm for Sac {
                         *e = rng.normal() as f32;
                     }
                     let row = &out[i * 2 * d..(i + 1) * 2 * d];
-                    tanh_gaussian::sample(&row[..d], &row[d..], &eps[..d], &mut a_norm[i * d..(i + 1) * d]);
+                    tanh_gaussian::sample(
+                        &row[..d],
+                        &row[d..],
+                        &eps[..d],
+                        &mut a_norm[i * d..(i + 1) * d],
+                    );
                 }
             }
             for (i, slot) in actions.iter_mut().enumerate() {
                 if let Action::Continuous(v) = slot {
                     for k in 0..d {
-                        v[k] = squash_to_bounds(a_norm[i * d + k], low[k], high[k], cfg.action_limit);
+                        v[k] =
+                            squash_to_bounds(a_norm[i * d + k], low[k], high[k], cfg.action_limit);
                     }
                 }
             }
             let outs = venv.step_all(&actions)?;
             for (i, out) in outs.iter().enumerate() {
-                let next = if out.step.done() { &out.final_observation } else { &out.step.observation };
-                replay.push_rows(&cur, i, next, 0, &a_norm[i * d..(i + 1) * d], out.step.reward as f32, out.step.terminated)?;
+                let next = if out.step.done() {
+                    &out.final_observation
+                } else {
+                    &out.step.observation
+                };
+                replay.push_rows(
+                    &cur,
+                    i,
+                    next,
+                    0,
+                    &a_norm[i * d..(i + 1) * d],
+                    out.step.reward as f32,
+                    out.step.terminated,
+                )?;
             }
             for (i, out) in outs.iter().enumerate() {
                 cur.write_row(i, &out.step.observation)?;
@@ -250,7 +340,12 @@ impl Algorithm for Sac {
                     }
                     for k in 0..b {
                         let row = &out[k * 2 * d..(k + 1) * 2 * d];
-                        logp[k] = tanh_gaussian::sample(&row[..d], &row[d..], &eps[k * d..(k + 1) * d], &mut a_pi[k * d..(k + 1) * d]);
+                        logp[k] = tanh_gaussian::sample(
+                            &row[..d],
+                            &row[d..],
+                            &eps[k * d..(k + 1) * d],
+                            &mut a_pi[k * d..(k + 1) * d],
+                        );
                     }
                     concat_obs_action(&xn, &a_pi, b, od, d, &mut qin);
                     ensure(&mut y, b);
@@ -259,7 +354,11 @@ impl Algorithm for Sac {
                     let q1 = qnet.forward(&c0.target, &qin, b, &mut c0.ws_t);
                     let q2 = qnet.forward(&c1.target, &qin, b, &mut c1.ws_t);
                     for k in 0..b {
-                        let boot = if sample.terminated[k] { 0.0 } else { q1[k].min(q2[k]) - alpha * logp[k] };
+                        let boot = if sample.terminated[k] {
+                            0.0
+                        } else {
+                            q1[k].min(q2[k]) - alpha * logp[k]
+                        };
                         y[k] = sample.rewards[k] + cfg.gamma * boot;
                     }
                     // Critic regression on the stored actions.
@@ -277,14 +376,24 @@ impl Algorithm for Sac {
                     }
                     // Actor: minimise α log π(a|s) − min Q(s, a), a reparameterised.
                     ensure(&mut out_buf, b * 2 * d);
-                    out_buf[..b * 2 * d].copy_from_slice(actor.forward(&policy.params, &x, b, &mut ws_actor));
+                    out_buf[..b * 2 * d].copy_from_slice(actor.forward(
+                        &policy.params,
+                        &x,
+                        b,
+                        &mut ws_actor,
+                    ));
                     let out = &out_buf;
                     for e in eps[..b * d].iter_mut() {
                         *e = noise_rng.normal() as f32;
                     }
                     for k in 0..b {
                         let row = &out[k * 2 * d..(k + 1) * 2 * d];
-                        logp[k] = tanh_gaussian::sample(&row[..d], &row[d..], &eps[k * d..(k + 1) * d], &mut a_pi[k * d..(k + 1) * d]);
+                        logp[k] = tanh_gaussian::sample(
+                            &row[..d],
+                            &row[d..],
+                            &eps[k * d..(k + 1) * d],
+                            &mut a_pi[k * d..(k + 1) * d],
+                        );
                     }
                     concat_obs_action(&x, &a_pi, b, od, d, &mut qin);
                     ensure(&mut qa, b);
@@ -306,17 +415,39 @@ impl Algorithm for Sac {
                             dq[k] = if pick == ci { -1.0 / b as f32 } else { 0.0 };
                         }
                         scratch.fill(0.0);
-                        qnet.backward(&c.params, &mut scratch, &qin, &dq, &mut c.ws, Some(&mut dqin));
+                        qnet.backward(
+                            &c.params,
+                            &mut scratch,
+                            &qin,
+                            &dq,
+                            &mut c.ws,
+                            Some(&mut dqin),
+                        );
                         for k in 0..b {
                             let da = &dqin[k * (od + d) + od..(k + 1) * (od + d)];
                             let row = &out[k * 2 * d..(k + 1) * 2 * d];
                             let (dm, dr) = dout[k * 2 * d..(k + 1) * 2 * d].split_at_mut(d);
                             let dlogp = if ci == 0 { alpha / b as f32 } else { 0.0 };
-                            tanh_gaussian::backward(&row[..d], &row[d..], &eps[k * d..(k + 1) * d], da, dlogp, dm, dr);
+                            tanh_gaussian::backward(
+                                &row[..d],
+                                &row[d..],
+                                &eps[k * d..(k + 1) * d],
+                                da,
+                                dlogp,
+                                dm,
+                                dr,
+                            );
                         }
                     }
                     actor_grads.fill(0.0);
-                    actor.backward(&policy.params, &mut actor_grads, &x, &dout, &mut ws_actor, None);
+                    actor.backward(
+                        &policy.params,
+                        &mut actor_grads,
+                        &x,
+                        &dout,
+                        &mut ws_actor,
+                        None,
+                    );
                     clip_grad_norm(&mut actor_grads, cfg.max_grad_norm);
                     actor_adam.step(&mut policy.params, &actor_grads, lr);
                     // Temperature: minimise −log α · (log π + target entropy).

@@ -3,7 +3,7 @@
 mod common;
 
 use a2perf_baselines::NetPolicy;
-use a2perf_core::{ActMode, Checkpoint, Env, Policy, Registry, RngStream, TrainingSettings, Value};
+use a2perf_core::{ActMode, Checkpoint, Env, Policy, Registry, TrainingSettings, Value};
 use common::*;
 
 fn settings() -> TrainingSettings {
@@ -28,7 +28,12 @@ fn trained(name: &str, continuous: bool) -> (Box<dyn Policy>, a2perf_core::EnvSp
         let (p, _) = train(alg.as_mut(), || Box::new(Point::new()), 1, settings());
         (p, Point::new().spec().clone())
     } else {
-        let (p, _) = train(alg.as_mut(), || Box::new(MaskedBandit::new()), 1, settings());
+        let (p, _) = train(
+            alg.as_mut(),
+            || Box::new(MaskedBandit::new()),
+            1,
+            settings(),
+        );
         (p, MaskedBandit::new().spec().clone())
     }
 }
@@ -36,7 +41,12 @@ fn trained(name: &str, continuous: bool) -> (Box<dyn Policy>, a2perf_core::EnvSp
 #[test]
 fn round_trip_is_bit_exact_for_every_algorithm() {
     let reg = registry();
-    for (name, continuous) in [("ppo", false), ("ppo", true), ("ddqn", false), ("sac", true)] {
+    for (name, continuous) in [
+        ("ppo", false),
+        ("ppo", true),
+        ("ddqn", false),
+        ("sac", true),
+    ] {
         let (mut policy, spec) = trained(name, continuous);
         let ckpt = policy.checkpoint().unwrap();
         let bytes = ckpt.to_bytes();
@@ -44,13 +54,21 @@ fn round_trip_is_bit_exact_for_every_algorithm() {
         let mut loaded = (reg.algorithm(name).unwrap().load_policy)(&back, &spec).unwrap();
         // Re-encoding the loaded policy gives the same bytes: parameters and statistics are exact.
         assert_eq!(loaded.checkpoint().unwrap().to_bytes(), bytes, "{name}");
-        let mut env: Box<dyn Env> = if continuous { Box::new(Point::new()) } else { Box::new(MaskedBandit::new()) };
+        let mut env: Box<dyn Env> = if continuous {
+            Box::new(Point::new())
+        } else {
+            Box::new(MaskedBandit::new())
+        };
         let mut obs = env.reset(Some(3)).unwrap();
         for _ in 0..5 {
             let a = policy.act(&obs, ActMode::Greedy).unwrap();
             assert_eq!(a, loaded.act(&obs, ActMode::Greedy).unwrap(), "{name}");
             let s = env.step(&a).unwrap();
-            obs = if s.done() { env.reset(None).unwrap() } else { s.observation };
+            obs = if s.done() {
+                env.reset(None).unwrap()
+            } else {
+                s.observation
+            };
         }
     }
 }
@@ -59,7 +77,12 @@ fn round_trip_is_bit_exact_for_every_algorithm() {
 fn corrupt_and_mismatched_payloads_are_rejected() {
     let (policy, spec) = trained("ppo", false);
     let good = policy.checkpoint().unwrap();
-    let load = |c: &Checkpoint, s: &a2perf_core::EnvSpec| NetPolicy::from_checkpoint(c, s, "ppo").map(|_| ()).unwrap_err().to_string();
+    let load = |c: &Checkpoint, s: &a2perf_core::EnvSpec| {
+        NetPolicy::from_checkpoint(c, s, "ppo")
+            .map(|_| ())
+            .unwrap_err()
+            .to_string()
+    };
 
     let mut c = good.clone();
     c.payload.truncate(c.payload.len() - 3);
@@ -108,15 +131,30 @@ fn corrupt_and_mismatched_payloads_are_rejected() {
 #[test]
 fn checkpoints_flow_through_the_training_context() {
     let dir = tempfile::tempdir().unwrap();
-    let mut alg = make_alg("ppo", &[("hidden_sizes", ints(&[8])), ("num_steps", Value::Int(16))]);
-    let factory = |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> { Ok(Box::new(MaskedBandit::new())) };
+    let mut alg = make_alg(
+        "ppo",
+        &[("hidden_sizes", ints(&[8])), ("num_steps", Value::Int(16))],
+    );
+    let factory = |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> {
+        Ok(Box::new(MaskedBandit::new()))
+    };
     let mut sink = a2perf_core::DirectoryCheckpoints::new(dir.path());
-    let s = TrainingSettings { total_env_steps: 320, eval_interval: 64, eval_episodes: 2, checkpoint_interval: 100, num_envs: 2 };
-    let mut ctx = a2perf_core::TrainingContext::new(&factory, 0, s, &mut sink, a2perf_core::CancelToken::new());
+    let s = TrainingSettings {
+        total_env_steps: 320,
+        eval_interval: 64,
+        eval_episodes: 2,
+        checkpoint_interval: 100,
+        num_envs: 2,
+    };
+    let mut ctx = a2perf_core::TrainingContext::new(
+        &factory,
+        0,
+        s,
+        &mut sink,
+        a2perf_core::CancelToken::new(),
+    );
     let _ = a2perf_core::Algorithm::train(alg.as_mut(), &mut ctx).unwrap();
     assert!(ctx.curve().points.len() >= 4);
     let files = std::fs::read_dir(dir.path()).unwrap().count();
     assert!(files >= 3, "{files} checkpoints");
-    let mut rng = RngStream::new(0, "x");
-    let _ = rng.next_u64();
 }

@@ -16,7 +16,7 @@ fn to_value(v: &ron::Value) -> Value {
         ron::Value::Number(n) => match n {
             ron::value::Number::F32(f) => Value::Float(f64::from(f.get())),
             ron::value::Number::F64(f) => Value::Float(f.get()),
-            other => Value::Int(other.clone().into_f64() as i64),
+            other => Value::Int((*other).into_f64() as i64),
         },
         ron::Value::String(s) => Value::Str(s.clone()),
         ron::Value::Seq(items) => Value::List(items.iter().map(to_value).collect()),
@@ -36,12 +36,17 @@ fn to_value(v: &ron::Value) -> Value {
 /// The file's top-level map with its includes merged in (structs merge key by key).
 fn load(path: &Path) -> BTreeMap<String, Value> {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let raw: ron::Value = ron::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let Value::Map(mut top) = to_value(&raw) else { panic!("{}: not a struct", path.display()) };
+    let raw: ron::Value =
+        ron::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let Value::Map(mut top) = to_value(&raw) else {
+        panic!("{}: not a struct", path.display())
+    };
     let mut merged = BTreeMap::new();
     if let Some(Value::List(incs)) = top.remove("include") {
         for inc in incs {
-            let Value::Str(rel) = inc else { panic!("bad include") };
+            let Value::Str(rel) = inc else {
+                panic!("bad include")
+            };
             merge(&mut merged, load(&path.parent().unwrap().join(rel)));
         }
     }
@@ -79,19 +84,45 @@ fn every_config_names_valid_hyperparameters() {
             for file in [format!("{algo}.ron"), format!("{algo}.paper.ron")] {
                 let path = dir.join(domain).join(&file);
                 let cfg = load(&path);
-                let Some(Value::Map(alg)) = cfg.get("algorithm") else { panic!("{}: no algorithm", path.display()) };
-                assert_eq!(alg.get("name"), Some(&Value::Str(algo.to_string())), "{}", path.display());
+                let Some(Value::Map(alg)) = cfg.get("algorithm") else {
+                    panic!("{}: no algorithm", path.display())
+                };
+                assert_eq!(
+                    alg.get("name"),
+                    Some(&Value::Str(algo.to_string())),
+                    "{}",
+                    path.display()
+                );
                 let mut hp = alg.clone();
                 hp.remove("name");
                 let entry = reg.algorithm(algo).unwrap();
-                let params = Params::resolve(&entry.params, &hp).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                let params = Params::resolve(&entry.params, &hp)
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
                 (entry.make)(&params).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-                let Some(Value::Map(t)) = cfg.get("training") else { panic!("{}: no training", path.display()) };
-                for key in ["total_env_steps", "eval_interval", "eval_episodes", "checkpoint_interval", "num_envs"] {
-                    assert!(matches!(t.get(key), Some(Value::Int(_))), "{}: training.{key}", path.display());
+                let Some(Value::Map(t)) = cfg.get("training") else {
+                    panic!("{}: no training", path.display())
+                };
+                for key in [
+                    "total_env_steps",
+                    "eval_interval",
+                    "eval_episodes",
+                    "checkpoint_interval",
+                    "num_envs",
+                ] {
+                    assert!(
+                        matches!(t.get(key), Some(Value::Int(_))),
+                        "{}: training.{key}",
+                        path.display()
+                    );
                 }
-                let Some(Value::Map(env)) = cfg.get("env") else { panic!("{}: no env", path.display()) };
-                assert!(matches!(env.get("id"), Some(Value::Str(_))), "{}", path.display());
+                let Some(Value::Map(env)) = cfg.get("env") else {
+                    panic!("{}: no env", path.display())
+                };
+                assert!(
+                    matches!(env.get("id"), Some(Value::Str(_))),
+                    "{}",
+                    path.display()
+                );
             }
         }
     }

@@ -4,13 +4,10 @@ mod common;
 
 use std::sync::Arc;
 
-use a2perf_baselines::dataset::{Dataset, Sample};
 use a2perf_baselines::Bc;
-use a2perf_core::{
-    ActMode, Action, Algorithm, Env, Policy, RandomPolicy, TrainingSettings, Value,
-};
+use a2perf_baselines::dataset::{Dataset, Sample};
+use a2perf_core::{ActMode, Action, Env, Policy, RandomPolicy, TrainingSettings, Value};
 use common::*;
-
 
 fn settings(total: u64, num_envs: usize) -> TrainingSettings {
     TrainingSettings {
@@ -38,7 +35,12 @@ fn ppo_learns_masked_bandit() {
             ("hidden_sizes", ints(&[16])),
         ],
     );
-    let (mut policy, curve) = train(alg.as_mut(), || Box::new(MaskedBandit::new()), 1, settings(3000, 2));
+    let (mut policy, curve) = train(
+        alg.as_mut(),
+        || Box::new(MaskedBandit::new()),
+        1,
+        settings(3000, 2),
+    );
     let s = bandit_success(policy.as_mut());
     assert!(s >= 0.95, "greedy success {s}, curve {:?}", curve.returns());
 }
@@ -56,7 +58,12 @@ fn ddqn_learns_masked_bandit() {
             ("hidden_sizes", ints(&[16])),
         ],
     );
-    let (mut policy, curve) = train(alg.as_mut(), || Box::new(MaskedBandit::new()), 2, settings(1500, 2));
+    let (mut policy, curve) = train(
+        alg.as_mut(),
+        || Box::new(MaskedBandit::new()),
+        2,
+        settings(1500, 2),
+    );
     let s = bandit_success(policy.as_mut());
     assert!(s >= 0.95, "greedy success {s}, curve {:?}", curve.returns());
 }
@@ -73,9 +80,18 @@ fn ppo_and_ddqn_solve_gridworld() {
             ("gamma", Value::Float(0.95)),
         ],
     );
-    let (mut p, curve) = train(ppo.as_mut(), || Box::new(Grid::new()), 3, settings(12_000, 2));
+    let (mut p, curve) = train(
+        ppo.as_mut(),
+        || Box::new(Grid::new()),
+        3,
+        settings(12_000, 2),
+    );
     let r = mean_return(&mut Grid::new(), p.as_mut(), 1);
-    assert!((r - optimal).abs() < 1e-9, "PPO return {r}, curve {:?}", curve.returns());
+    assert!(
+        (r - optimal).abs() < 1e-9,
+        "PPO return {r}, curve {:?}",
+        curve.returns()
+    );
 
     let mut ddqn = make_alg(
         "ddqn",
@@ -91,16 +107,29 @@ fn ppo_and_ddqn_solve_gridworld() {
             ("hidden_sizes", ints(&[32])),
         ],
     );
-    let (mut q, curve) = train(ddqn.as_mut(), || Box::new(Grid::new()), 4, settings(8_000, 2));
+    let (mut q, curve) = train(
+        ddqn.as_mut(),
+        || Box::new(Grid::new()),
+        4,
+        settings(8_000, 2),
+    );
     let r = mean_return(&mut Grid::new(), q.as_mut(), 1);
-    assert!((r - optimal).abs() < 1e-9, "DDQN return {r}, curve {:?}", curve.returns());
+    assert!(
+        (r - optimal).abs() < 1e-9,
+        "DDQN return {r}, curve {:?}",
+        curve.returns()
+    );
 }
 
 fn point_baseline() -> f64 {
     // The untrained (zero-mean) policy leaves x where it starts.
     struct Zero;
     impl Policy for Zero {
-        fn act(&mut self, _o: &a2perf_core::Observation, _m: ActMode) -> Result<Action, a2perf_core::PolicyError> {
+        fn act(
+            &mut self,
+            _o: &a2perf_core::Observation,
+            _m: ActMode,
+        ) -> Result<Action, a2perf_core::PolicyError> {
             Ok(Action::Continuous(vec![0.0]))
         }
         fn checkpoint(&self) -> Result<a2perf_core::Checkpoint, a2perf_core::PolicyError> {
@@ -121,9 +150,18 @@ fn ppo_improves_continuous_point() {
             ("hidden_sizes", ints(&[32])),
         ],
     );
-    let (mut p, curve) = train(alg.as_mut(), || Box::new(Point::new()), 5, settings(20_000, 2));
+    let (mut p, curve) = train(
+        alg.as_mut(),
+        || Box::new(Point::new()),
+        5,
+        settings(20_000, 2),
+    );
     let r = mean_return(&mut Point::new(), p.as_mut(), 40);
-    assert!(r > 0.5 * base, "PPO {r} vs zero-action {base}; curve {:?}", curve.returns());
+    assert!(
+        r > 0.5 * base,
+        "PPO {r} vs zero-action {base}; curve {:?}",
+        curve.returns()
+    );
 }
 
 #[test]
@@ -139,9 +177,18 @@ fn sac_improves_continuous_point() {
             ("hidden_sizes", ints(&[32, 32])),
         ],
     );
-    let (mut p, curve) = train(alg.as_mut(), || Box::new(Point::new()), 6, settings(2_500, 1));
+    let (mut p, curve) = train(
+        alg.as_mut(),
+        || Box::new(Point::new()),
+        6,
+        settings(2_500, 1),
+    );
     let r = mean_return(&mut Point::new(), p.as_mut(), 40);
-    assert!(r > 0.5 * base, "SAC {r} vs zero-action {base}; curve {:?}", curve.returns());
+    assert!(
+        r > 0.5 * base,
+        "SAC {r} vs zero-action {base}; curve {:?}",
+        curve.returns()
+    );
 }
 
 fn bandit_oracle_dataset(n: usize) -> Dataset {
@@ -150,21 +197,41 @@ fn bandit_oracle_dataset(n: usize) -> Dataset {
     for i in 0..n {
         let obs = env.reset(Some(i as u64)).unwrap();
         let ctx = obs.tensors[0].data.iter().position(|v| *v > 0.5).unwrap();
-        samples.push(Sample { observation: obs, action: Action::Discrete(MaskedBandit::best(ctx)) });
+        samples.push(Sample {
+            observation: obs,
+            action: Action::Discrete(MaskedBandit::best(ctx)),
+        });
     }
-    Dataset { env_id: Some("MaskedBandit-v0".into()), samples }
+    Dataset {
+        env_id: Some("MaskedBandit-v0".into()),
+        samples,
+    }
 }
 
 #[test]
 fn bc_clones_discrete_and_continuous_experts() {
     let data = bandit_oracle_dataset(64);
-    let bc = Bc::from_params(&a2perf_core::Params::resolve(&Bc::params(), &[
-        ("learning_rate".to_string(), Value::Float(3e-3)),
-        ("batch_size".to_string(), Value::Int(32)),
-        ("hidden_sizes".to_string(), ints(&[16])),
-    ].into_iter().collect()).unwrap()).unwrap();
+    let bc = Bc::from_params(
+        &a2perf_core::Params::resolve(
+            &Bc::params(),
+            &[
+                ("learning_rate".to_string(), Value::Float(3e-3)),
+                ("batch_size".to_string(), Value::Int(32)),
+                ("hidden_sizes".to_string(), ints(&[16])),
+            ]
+            .into_iter()
+            .collect(),
+        )
+        .unwrap(),
+    )
+    .unwrap();
     let mut bc = bc.with_loader(Arc::new(data));
-    let (mut p, _) = train(&mut bc, || Box::new(MaskedBandit::new()), 7, settings(32 * 300, 1));
+    let (mut p, _) = train(
+        &mut bc,
+        || Box::new(MaskedBandit::new()),
+        7,
+        settings(32 * 300, 1),
+    );
     assert!(bandit_success(p.as_mut()) >= 0.99);
 
     // Continuous expert on the point task: a = clamp(−4x).
@@ -173,16 +240,36 @@ fn bc_clones_discrete_and_continuous_experts() {
     for i in 0..200 {
         let obs = env.reset(Some(i)).unwrap();
         let x = obs.tensors[0].data[0];
-        samples.push(Sample { observation: obs, action: Action::Continuous(vec![(-4.0 * x).clamp(-1.0, 1.0)]) });
+        samples.push(Sample {
+            observation: obs,
+            action: Action::Continuous(vec![(-4.0 * x).clamp(-1.0, 1.0)]),
+        });
     }
     for loss in ["nll", "mse"] {
-        let bc = Bc::from_params(&a2perf_core::Params::resolve(&Bc::params(), &[
-            ("learning_rate".to_string(), Value::Float(3e-3)),
-            ("loss".to_string(), Value::Str(loss.into())),
-            ("hidden_sizes".to_string(), ints(&[32])),
-        ].into_iter().collect()).unwrap()).unwrap();
-        let mut bc = bc.with_loader(Arc::new(Dataset { env_id: None, samples: samples.clone() }));
-        let (mut p, _) = train(&mut bc, || Box::new(Point::new()), 8, settings(128 * 400, 1));
+        let bc = Bc::from_params(
+            &a2perf_core::Params::resolve(
+                &Bc::params(),
+                &[
+                    ("learning_rate".to_string(), Value::Float(3e-3)),
+                    ("loss".to_string(), Value::Str(loss.into())),
+                    ("hidden_sizes".to_string(), ints(&[32])),
+                ]
+                .into_iter()
+                .collect(),
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        let mut bc = bc.with_loader(Arc::new(Dataset {
+            env_id: None,
+            samples: samples.clone(),
+        }));
+        let (mut p, _) = train(
+            &mut bc,
+            || Box::new(Point::new()),
+            8,
+            settings(128 * 400, 1),
+        );
         let r = mean_return(&mut Point::new(), p.as_mut(), 40);
         assert!(r > 0.5 * point_baseline(), "BC ({loss}) return {r}");
     }
@@ -191,9 +278,17 @@ fn bc_clones_discrete_and_continuous_experts() {
 #[test]
 fn bc_without_dataset_is_a_clear_error() {
     let mut alg = make_alg("bc", &[]);
-    let factory = |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> { Ok(Box::new(MaskedBandit::new())) };
+    let factory = |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> {
+        Ok(Box::new(MaskedBandit::new()))
+    };
     let mut sink = a2perf_core::DiscardCheckpoints;
-    let mut ctx = a2perf_core::TrainingContext::new(&factory, 0, settings(100, 1), &mut sink, a2perf_core::CancelToken::new());
+    let mut ctx = a2perf_core::TrainingContext::new(
+        &factory,
+        0,
+        settings(100, 1),
+        &mut sink,
+        a2perf_core::CancelToken::new(),
+    );
     let err = alg.train(&mut ctx).err().expect("must fail");
     assert!(err.to_string().contains("dataset"), "{err}");
 }
@@ -202,8 +297,23 @@ fn bc_without_dataset_is_a_clear_error() {
 fn same_seed_gives_same_curve_and_parallel_envs_are_deterministic() {
     for name in ["ppo", "ddqn"] {
         let run = |seed| {
-            let mut alg = make_alg(name, &[("hidden_sizes", ints(&[8])), ("learning_starts", Value::Int(16))].iter().filter(|(k, _)| name == "ddqn" || *k != "learning_starts").cloned().collect::<Vec<_>>());
-            let (mut p, curve) = train(alg.as_mut(), || Box::new(MaskedBandit::new()), seed, settings(800, 3));
+            let mut alg = make_alg(
+                name,
+                &[
+                    ("hidden_sizes", ints(&[8])),
+                    ("learning_starts", Value::Int(16)),
+                ]
+                .iter()
+                .filter(|(k, _)| name == "ddqn" || *k != "learning_starts")
+                .cloned()
+                .collect::<Vec<_>>(),
+            );
+            let (p, curve) = train(
+                alg.as_mut(),
+                || Box::new(MaskedBandit::new()),
+                seed,
+                settings(800, 3),
+            );
             (curve.returns(), p.checkpoint().unwrap())
         };
         let (a, ca) = run(11);
@@ -211,23 +321,51 @@ fn same_seed_gives_same_curve_and_parallel_envs_are_deterministic() {
         assert_eq!(a, b, "{name}: curves differ for the same seed");
         assert_eq!(ca, cb, "{name}: parameters differ for the same seed");
         let (c, cc) = run(12);
-        assert!(a != c || ca != cc, "{name}: different seeds gave identical runs");
+        assert!(
+            a != c || ca != cc,
+            "{name}: different seeds gave identical runs"
+        );
     }
-    let mut sac = || make_alg("sac", &[("hidden_sizes", ints(&[8])), ("learning_starts", Value::Int(50)), ("batch_size", Value::Int(16))]);
-    let (_, a) = train(sac().as_mut(), || Box::new(Point::new()), 3, settings(200, 2));
-    let (_, b) = train(sac().as_mut(), || Box::new(Point::new()), 3, settings(200, 2));
+    let sac = || {
+        make_alg(
+            "sac",
+            &[
+                ("hidden_sizes", ints(&[8])),
+                ("learning_starts", Value::Int(50)),
+                ("batch_size", Value::Int(16)),
+            ],
+        )
+    };
+    let (_, a) = train(
+        sac().as_mut(),
+        || Box::new(Point::new()),
+        3,
+        settings(200, 2),
+    );
+    let (_, b) = train(
+        sac().as_mut(),
+        || Box::new(Point::new()),
+        3,
+        settings(200, 2),
+    );
     assert_eq!(a.returns(), b.returns());
 }
 
 #[test]
 fn cancellation_is_honoured() {
     let mut alg = make_alg("ppo", &[("hidden_sizes", ints(&[8]))]);
-    let factory = |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> { Ok(Box::new(MaskedBandit::new())) };
+    let factory = |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> {
+        Ok(Box::new(MaskedBandit::new()))
+    };
     let mut sink = a2perf_core::DiscardCheckpoints;
     let cancel = a2perf_core::CancelToken::new();
     cancel.cancel();
-    let mut ctx = a2perf_core::TrainingContext::new(&factory, 0, settings(100_000, 1), &mut sink, cancel);
-    assert!(matches!(alg.train(&mut ctx), Err(a2perf_core::RunError::Cancelled)));
+    let mut ctx =
+        a2perf_core::TrainingContext::new(&factory, 0, settings(100_000, 1), &mut sink, cancel);
+    assert!(matches!(
+        alg.train(&mut ctx),
+        Err(a2perf_core::RunError::Cancelled)
+    ));
 }
 
 #[test]
@@ -237,7 +375,9 @@ fn random_policy_is_worse_than_trained_bandit_policy() {
     let mut env = MaskedBandit::new();
     let mut total = 0.0;
     for i in 0..400 {
-        total += a2perf_core::rollout(&mut env, &mut rp, i, ActMode::Explore, false).unwrap().episode_return;
+        total += a2perf_core::rollout(&mut env, &mut rp, i, ActMode::Explore, false)
+            .unwrap()
+            .episode_return;
     }
     let s = total / 400.0;
     assert!((0.15..0.35).contains(&s), "{s}");

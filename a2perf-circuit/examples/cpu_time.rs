@@ -8,8 +8,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use a2perf_circuit::{
-    CircuitEnv, CircuitEnvConfig, CostSettings, GeneratorConfig, Netlist, Placement,
-    PlacementCost, SoftMacroRule, generate,
+    CircuitEnv, CircuitEnvConfig, CostSettings, GeneratorConfig, Netlist, Placement, PlacementCost,
+    SoftMacroRule, generate,
 };
 use a2perf_core::{Action, Env, Observation, RngStream, Step};
 
@@ -34,12 +34,18 @@ fn measure(label: &str, n: u64, mut f: impl FnMut()) {
             (b - a) as f64 / 1e3 / n as f64,
             wall * 1e6
         ),
-        _ => println!("{label:<44} wall {:>10.1} µs (no /proc/self/schedstat)", wall * 1e6),
+        _ => println!(
+            "{label:<44} wall {:>10.1} µs (no /proc/self/schedstat)",
+            wall * 1e6
+        ),
     }
 }
 
 fn main() {
-    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/circuit/ariane133_ng45"));
+    let dir = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/data/circuit/ariane133_ng45"
+    ));
     let (name, netlist, placement, settings) = if dir.join("netlist.pb.txt.gz").exists() {
         let n = Netlist::from_file(dir.join("netlist.pb.txt.gz"), SoftMacroRule::default())
             .expect("ng45 parses");
@@ -69,8 +75,14 @@ fn main() {
         let m = hard[rng.index(hard.len())];
         cost.place_at_cell(m, rng.index(c * r));
     });
-    for (label, fd) in [("episode, 133 macros + FD placer", true), ("episode, 133 macros, no FD", false)] {
-        let config = CircuitEnvConfig { std_cell_placement: fd, ..Default::default() };
+    for (label, fd) in [
+        ("episode, 133 macros + FD placer", true),
+        ("episode, 133 macros, no FD", false),
+    ] {
+        let config = CircuitEnvConfig {
+            std_cell_placement: fd,
+            ..Default::default()
+        };
         let mut env = CircuitEnv::new(&netlist, Some(&placement), settings.clone(), config)
             .expect("env builds");
         let mut obs = Observation::default();

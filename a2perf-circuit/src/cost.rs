@@ -355,6 +355,7 @@ pub struct PlacementCost {
     pub(crate) net_cw: Vec<f64>,
     pub(crate) net_hpwl: Vec<f64>,
     pub(crate) net_count: f64,
+    pub(crate) wl_total: f64,
     pub(crate) pin_owner: Vec<u32>,
     pub(crate) pin_ox: Vec<f64>,
     pub(crate) pin_oy: Vec<f64>,
@@ -543,6 +544,7 @@ impl PlacementCost {
                 let s: f64 = net_w.iter().sum();
                 if s == 0.0 { 1.0 } else { s }
             },
+            wl_total: 0.0,
             settings,
             pgrid,
             cgrid,
@@ -770,6 +772,14 @@ impl PlacementCost {
     /// indices the reference would reject are skipped.
     fn route_net(&mut self, n: usize, sign: f64) {
         let (s, e) = (self.net_start[n] as usize, self.net_start[n + 1] as usize);
+        if e - s == 2 {
+            // Most nets have two pins: no set needed.
+            let (a, b) = (self.pin_cell[s], self.pin_cell[s + 1]);
+            if a != b {
+                self.two_pin(a, b, sign * self.net_cw[n]);
+            }
+            return;
+        }
         let mut cells = std::mem::take(&mut self.cells);
         cells.clear();
         for p in s..e {
@@ -908,6 +918,12 @@ impl PlacementCost {
             self.net_hpwl[n] = self.net_hpwl(n);
             self.route_net(n, 1.0);
         }
+        self.wl_total = self
+            .net_w
+            .iter()
+            .zip(&self.net_hpwl)
+            .map(|(w, h)| w * h)
+            .sum();
         self.occupied.iter_mut().for_each(|v| *v = 0.0);
         for k in 0..self.area_nodes.len() {
             let i = self.area_nodes[k] as usize;
@@ -969,7 +985,10 @@ impl PlacementCost {
         }
         for k in ns..ne {
             let n = self.node_nets[k] as usize;
+            let before = self.net_hpwl[n];
             self.net_hpwl[n] = self.net_hpwl(n);
+            // Running total (exact sum restored by `recompute`).
+            self.wl_total += self.net_w[n] * (self.net_hpwl[n] - before);
             self.route_net(n, 1.0);
         }
         if self.counts_in_density(i) {
@@ -980,13 +999,9 @@ impl PlacementCost {
         }
     }
 
-    /// Σ w·HPWL over nets.
+    /// Σ w·HPWL over nets (maintained incrementally; exact after [`PlacementCost::recompute`]).
     pub fn wirelength(&self) -> f64 {
-        self.net_w
-            .iter()
-            .zip(&self.net_hpwl)
-            .map(|(w, h)| w * h)
-            .sum()
+        self.wl_total
     }
 
     /// Σ net weights.

@@ -67,9 +67,7 @@ pub struct FdScratch {
     // Active nets (at least one movable endpoint), flattened.
     a_start: Vec<u32>,
     a_obj: Vec<u32>,
-    a_port: Vec<bool>,
-    a_fx: Vec<f64>,
-    a_fy: Vec<f64>,
+    a_fac: Vec<f64>,
     a_w: Vec<f64>,
 }
 
@@ -130,16 +128,12 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
             s.oy.push(ch / 2.0 + r * a.sin());
         }
     }
-    s.dx.clear();
-    s.dx.resize(nobj, 0.0);
-    s.dy.clear();
-    s.dy.resize(nobj, 0.0);
-    // Active nets; fixed pins (hard macros, ports) keep their cached positions.
+    // Active nets. Every fixed pin (hard-macro pin, port) gets its own slot after the objects,
+    // holding its position, so the attraction loop has no branches; forces written to those slots
+    // are ignored. Pins of the same movable node coincide, so they exert no force on each other.
     s.a_start.clear();
     s.a_obj.clear();
-    s.a_port.clear();
-    s.a_fx.clear();
-    s.a_fy.clear();
+    s.a_fac.clear();
     s.a_w.clear();
     s.a_start.push(0);
     for net in 0..cost.net_w.len() {
@@ -150,17 +144,26 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         if !(a..b).any(|p| is_mov(cost, cost.pin_owner[p] as usize)) {
             continue;
         }
+        let driver_port = cost.kind[cost.pin_owner[a] as usize] == NodeKind::Port;
         for p in a..b {
             let o = cost.pin_owner[p] as usize;
-            let obj = s.obj_of[o];
-            s.a_obj.push(if is_mov(cost, o) { obj } else { NONE });
-            s.a_port.push(cost.kind[o] == NodeKind::Port);
-            s.a_fx.push(cost.pin_x[p]);
-            s.a_fy.push(cost.pin_y[p]);
+            if is_mov(cost, o) {
+                s.a_obj.push(s.obj_of[o]);
+            } else {
+                s.a_obj.push(s.ox.len() as u32);
+                s.ox.push(cost.pin_x[p]);
+                s.oy.push(cost.pin_y[p]);
+            }
+            let port = driver_port || cost.kind[o] == NodeKind::Port;
+            s.a_fac.push(if port { schedule.io_factor } else { 1.0 });
         }
         s.a_start.push(s.a_obj.len() as u32);
         s.a_w.push(cost.net_w[net]);
     }
+    s.dx.clear();
+    s.dx.resize(s.ox.len(), 0.0);
+    s.dy.clear();
+    s.dy.resize(s.ox.len(), 0.0);
     let max_soft = (hard..nobj)
         .map(|k| s.ohw[k].max(s.ohh[k]) * 2.0)
         .fold(0.0f64, f64::max);
@@ -178,7 +181,6 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
                 (cw, ch),
                 schedule.attract[round],
                 schedule.repel[round],
-                schedule.io_factor,
                 max_move,
                 max_soft,
                 hard,
@@ -199,49 +201,31 @@ fn step(
     (cw, ch): (f64, f64),
     attract: f64,
     repel: f64,
-    io: f64,
     max_move: f64,
     max_soft: f64,
     hard: usize,
 ) {
     let nobj = s.node.len();
-    s.dx[hard..].iter_mut().for_each(|v| *v = 0.0);
-    s.dy[hard..].iter_mut().for_each(|v| *v = 0.0);
+    s.dx.iter_mut().for_each(|v| *v = 0.0);
+    s.dy.iter_mut().for_each(|v| *v = 0.0);
     if attract != 0.0 {
         for net in 0..s.a_w.len() {
             let (a, b) = (s.a_start[net] as usize, s.a_start[net + 1] as usize);
-            let d = s.a_obj[a];
-            let (dxp, dyp) = if d == NONE {
-                (s.a_fx[a], s.a_fy[a])
-            } else {
-                (s.ox[d as usize], s.oy[d as usize])
-            };
-            let d_port = s.a_port[a];
+            let d = s.a_obj[a] as usize;
+            let (dxp, dyp) = (s.ox[d], s.oy[d]);
             let w = s.a_w[net] * attract;
+            let (mut fdx, mut fdy) = (0.0, 0.0);
             for p in a + 1..b {
-                let o = s.a_obj[p];
-                if o == d && d != NONE {
-                    continue;
-                }
-                if d == NONE && o == NONE {
-                    continue;
-                }
-                let (sx, sy) = if o == NONE {
-                    (s.a_fx[p], s.a_fy[p])
-                } else {
-                    (s.ox[o as usize], s.oy[o as usize])
-                };
-                let f = if d_port || s.a_port[p] { w * io } else { w };
-                let (fx, fy) = (f * (sx - dxp), f * (sy - dyp));
-                if d != NONE {
-                    s.dx[d as usize] += fx;
-                    s.dy[d as usize] += fy;
-                }
-                if o != NONE {
-                    s.dx[o as usize] -= fx;
-                    s.dy[o as usize] -= fy;
-                }
+                let o = s.a_obj[p] as usize;
+                let f = w * s.a_fac[p];
+                let (fx, fy) = (f * (s.ox[o] - dxp), f * (s.oy[o] - dyp));
+                fdx += fx;
+                fdy += fy;
+                s.dx[o] -= fx;
+                s.dy[o] -= fy;
             }
+            s.dx[d] += fdx;
+            s.dy[d] += fdy;
         }
     }
     if repel != 0.0 {

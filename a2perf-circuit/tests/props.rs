@@ -235,3 +235,37 @@ fn shared_placements_round_trip_identically() {
         [490.0, 490.0, 500.0, 500.0, 1.0]
     );
 }
+
+#[test]
+fn fd_placer_is_deterministic_and_stays_inside() {
+    use a2perf_circuit::placer::{FdSchedule, FdScratch, place_std_cells};
+    let (netlist, cost0) = small_cost(5);
+    let mut a = cost0.clone();
+    let mut b = cost0.clone();
+    let sched = FdSchedule::default();
+    place_std_cells(&mut a, &sched, &mut FdScratch::default());
+    place_std_cells(&mut b, &sched, &mut FdScratch::default());
+    let (w, h) = (a.settings().canvas_width, a.settings().canvas_height);
+    let mut moved = 0;
+    for i in 0..netlist.nodes.len() {
+        assert_eq!(a.position(i), b.position(i), "node {i}");
+        if netlist.nodes[i].kind == NodeKind::SoftMacro {
+            let (x, y) = a.position(i);
+            let (sw, sh) = a.size(i);
+            assert!(
+                x - sw / 2.0 >= 0.0
+                    && x + sw / 2.0 <= w
+                    && y - sh / 2.0 >= 0.0
+                    && y + sh / 2.0 <= h
+            );
+            moved += usize::from(a.position(i) != cost0.position(i));
+        } else {
+            assert_eq!(a.position(i), cost0.position(i), "only soft macros move");
+        }
+    }
+    assert!(moved > 0);
+    // Costs after the placer equal a full recompute.
+    let mut full = a.clone();
+    full.recompute();
+    assert_close(&a.costs(), &full.costs());
+}

@@ -84,7 +84,19 @@ fn reliability(args: &ReliabilityArgs) -> Result<()> {
         .map(csv::read_rollouts)
         .transpose()?;
     let out = match args.definition {
-        Definition::A2perf => a2perf_json(&curves, rollouts.as_deref())?,
+        Definition::A2perf => a2perf_json(&curves, rollouts.as_deref()).map_err(|e| {
+            // Name the run as the file does, not by its position.
+            match e.downcast_ref::<a2::ReliabilityError>() {
+                Some(
+                    a2::ReliabilityError::TooShort { run, .. }
+                    | a2::ReliabilityError::StepSpacing { run, .. },
+                ) => {
+                    let id = named.runs.get(*run).map_or("?", |(id, _)| id.as_str());
+                    e.context(format!("{}: run `{id}`", args.curves.display()))
+                }
+                _ => e,
+            }
+        })?,
         Definition::Chan2019 => chan2019_json(&curves, rollouts.as_deref())?,
     };
     if args.json {
@@ -96,7 +108,7 @@ fn reliability(args: &ReliabilityArgs) -> Result<()> {
 }
 
 fn a2perf_json(curves: &[a2perf_metrics::Curve], rollouts: Option<&[f64]>) -> Result<Value> {
-    let t = a2::training_reliability(curves).context("computing the A2Perf training metrics")?;
+    let t = a2::training_reliability(curves)?;
     let mut m = Map::new();
     let spread = |s: a2::Spread| json!({"mean": s.mean, "std": s.std});
     m.insert(

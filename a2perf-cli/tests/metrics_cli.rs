@@ -145,6 +145,23 @@ fn bad_files_give_line_numbered_errors() {
         "{err}"
     );
 
+    std::fs::write(
+        &curves,
+        "run,step,value\nfirst,0,1\nfirst,1,2\nlonely,0,1\n",
+    )
+    .unwrap();
+    let out = a2perf(&[
+        "metrics",
+        "reliability",
+        "--curves",
+        curves.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("run `lonely`"),
+        "{err}"
+    );
+
     let missing = dir.path().join("missing.csv");
     let out = a2perf(&["metrics", "iqm", "--scores", missing.to_str().unwrap()]);
     assert!(!out.status.success());

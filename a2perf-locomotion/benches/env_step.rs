@@ -71,17 +71,22 @@ fn thread_cpu_ns() -> Option<u64> {
     s.split_whitespace().next()?.parse().ok()
 }
 
-fn cpu_time_throughput(solver_iterations: usize) {
+fn cpu_time_throughput(solver_iterations: usize, random: bool) {
     let mut env = make_with(solver_iterations);
     let mut obs = Observation::default();
     env.reset_into(Some(0), &mut obs).unwrap();
-    let action = Action::Continuous(vec![0.0; 12]);
+    let mut rng = a2perf_core::RngStream::new(0, "bench-actions");
+    let space = env.spec().action_space.clone();
+    let mut action = Action::Continuous(vec![0.0; 12]);
     let mut step = Step::default();
     let n = 2000;
     let (Some(c0), w0) = (thread_cpu_ns(), std::time::Instant::now()) else {
         return;
     };
     for _ in 0..n {
+        if random && let Some(a) = space.sample(&mut rng, None) {
+            action = a;
+        }
         env.step_into(&action, &mut step).unwrap();
         if step.done() {
             env.reset_into(None, &mut obs).unwrap();
@@ -90,7 +95,8 @@ fn cpu_time_throughput(solver_iterations: usize) {
     let cpu = (thread_cpu_ns().unwrap_or(c0) - c0) as f64 * 1e-9;
     let wall = w0.elapsed().as_secs_f64();
     println!(
-        "env steps (DogPace, zero actions, resets included, {solver_iterations} solver iteration(s)): {:.0} per CPU-second ({:.0} substeps/CPU-s), {:.0} per wall-second",
+        "env steps (DogPace, {} actions, resets included, {solver_iterations} solver iteration(s)): {:.0} per CPU-second ({:.0} substeps/CPU-s), {:.0} per wall-second",
+        if random { "uniform random" } else { "zero" },
         n as f64 / cpu,
         n as f64 * 33.0 / cpu,
         n as f64 / wall
@@ -99,8 +105,9 @@ fn cpu_time_throughput(solver_iterations: usize) {
 
 fn benches(c: &mut Criterion) {
     allocations_per_step();
-    cpu_time_throughput(2);
-    cpu_time_throughput(1);
+    cpu_time_throughput(1, false);
+    cpu_time_throughput(2, false);
+    cpu_time_throughput(1, true);
     let mut g = c.benchmark_group("locomotion");
     g.sample_size(20);
     let mut env = make();

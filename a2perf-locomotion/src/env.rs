@@ -241,7 +241,10 @@ fn motion_for(model: &RobotModel, source: &MotionSource) -> Result<(MotionClip, 
         MotionSource::File(path) => {
             let clip = MotionClip::load(Path::new(path)).map_err(|e| EnvError::BadFile {
                 path: path.clone(),
-                reason: e.to_string(),
+                reason: match e {
+                    crate::motion::MotionError::Io { source, .. } => source.to_string(),
+                    crate::motion::MotionError::Invalid { reason, .. } => reason,
+                },
             })?;
             Ok((clip, path.clone()))
         }

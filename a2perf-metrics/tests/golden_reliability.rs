@@ -19,12 +19,13 @@ use serde_json::Value;
 /// Exact (order-statistics and means only) metrics.
 const REL: f64 = 1e-9;
 const ABS: f64 = 1e-12;
-/// The ill-conditioned order-8 filter at cutoff 0.01 (see the golden file's note). We reproduce
-/// SciPy's filter design bit for bit, but its `lfilter_zi` solve (LAPACK through OpenBLAS
-/// kernels) only to rounding, which this filter amplifies: four of the five golden curves agree
-/// within 7.3e-4, the fifth within 1.17e-3 (and so does `LowerCVaROnAcross`, the minimum across
-/// runs, which is that curve). The issue asks for 1e-3; 1.5e-3 is what is achievable here.
-const ABS_LOWPASS_001: f64 = 1.5e-3;
+/// The ill-conditioned order-8 filter at cutoff 0.01 (see the golden file's note): one ulp in a
+/// single `a` coefficient moves the filtered curves by up to 1.5e-2, so only a bit-exact
+/// reproduction of the reference chain can meet the issue's 1e-3. We reproduce it exactly —
+/// SciPy's filter design, and NumPy's `linalg.solve` for `lfilter_zi` as OpenBLAS 0.3.23 runs it
+/// (AVX-512 kernels, two-thread blocked `getrf_parallel`) — and the five golden curves match bit
+/// for bit; downstream statistics differ by at most 1.1e-16 (summation order in means).
+const ABS_LOWPASS_001: f64 = 1e-12;
 /// The well-conditioned cutoff 0.1: filter outputs agree to ~1e-10 absolute (the golden file
 /// recommends 1e-8).
 const ABS_LOWPASS_01: f64 = 1e-9;

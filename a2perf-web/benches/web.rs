@@ -156,9 +156,10 @@ fn chromium(c: &mut Criterion) {
         .map(|e| e.chromium().unwrap().memory())
         .collect();
     println!(
-        "chromium memory per environment ({n} environments, 300 steps each): PSS {:.0} MiB, USS {:.0} MiB",
+        "chromium memory per environment ({n} environments, 300 steps each): PSS {:.0} MiB, USS {:.0} MiB, summed RSS {:.0} MiB",
         mib(ms.iter().map(|m| m.pss_bytes).sum::<u64>() / n),
-        mib(ms.iter().map(|m| m.uss_bytes).sum::<u64>() / n)
+        mib(ms.iter().map(|m| m.uss_bytes).sum::<u64>() / n),
+        mib(ms.iter().map(|m| m.rss_bytes).sum::<u64>() / n)
     );
     for e in envs.iter_mut() {
         e.close().unwrap();

@@ -146,13 +146,30 @@ impl HttpConn {
     }
 
     fn request(&mut self, method: &str, path: &str, body: &str) -> std::io::Result<(u16, String)> {
-        let r = self.request_once(method, path, body);
-        if r.is_err() {
-            // A kept-alive connection may have been closed by the server; retry on a fresh one.
-            self.reader = None;
-            return self.request_once(method, path, body);
+        let reused = self.reader.is_some();
+        match self.request_once(method, path, body) {
+            // A kept-alive connection the server had closed: the request was not processed, so
+            // retrying on a fresh connection cannot apply an action twice. Timeouts are not
+            // retried.
+            Err(e)
+                if reused
+                    && matches!(
+                        e.kind(),
+                        std::io::ErrorKind::UnexpectedEof
+                            | std::io::ErrorKind::ConnectionReset
+                            | std::io::ErrorKind::ConnectionAborted
+                            | std::io::ErrorKind::BrokenPipe
+                    ) =>
+            {
+                self.reader = None;
+                self.request_once(method, path, body)
+            }
+            Err(e) => {
+                self.reader = None;
+                Err(e)
+            }
+            ok => ok,
         }
-        r
     }
 
     fn request_once(

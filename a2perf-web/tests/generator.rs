@@ -198,3 +198,41 @@ fn the_designs_parameter_draws_the_pool_from_a_design_file() {
     let err = WebNavEnv::new(cfg1).err().unwrap().to_string();
     assert!(err.contains("01.json") && err.contains("only 7"), "{err}");
 }
+
+mod props {
+    use a2perf_core::RngStream;
+    use a2perf_web::{Limits, Vocabulary, Website, check_solvable, level_of_probability};
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        #[test]
+        fn candidates_are_well_formed(seed in 0u64..10_000, index in 0u64..10_000) {
+            let d = a2perf_web::generator::candidate(seed, index);
+            let diff = d.difficulty();
+            // Per page p ≤ 1 + 1e-8 (the formula's epsilon), so a page can be −1e-8.
+            prop_assert!(diff >= -1e-7 * d.pages.len() as f64 && diff.is_finite());
+            prop_assert_eq!(d.level(), level_of_probability((-diff).exp()));
+            if check_solvable(&d, &Limits::default()).is_ok() {
+                prop_assert!(d.oracle_steps() <= 25);
+            }
+            let site = Website::build(&d, &mut RngStream::new(seed, "p"), Vocabulary::standard());
+            // Pre-order tree: every subtree lies inside its parent's.
+            for (i, n) in site.nodes.iter().enumerate() {
+                prop_assert!(n.end as usize > i && n.end as usize <= site.nodes.len());
+                let mut j = i + 1;
+                while j < n.end as usize {
+                    prop_assert!(site.nodes[j].end <= n.end);
+                    j = site.nodes[j].end as usize;
+                }
+            }
+            prop_assert_eq!(site.pages.len(), d.pages.len().max(1));
+            prop_assert_eq!(site.fields.len(), d.unique_active().len());
+            let mut keys: Vec<_> = site.fields.iter().map(|f| f.key).collect();
+            let sorted = { let mut k = keys.clone(); k.sort_unstable(); k };
+            prop_assert_eq!(&keys, &sorted);
+            keys.dedup();
+            prop_assert_eq!(keys.len(), site.fields.len());
+        }
+    }
+}

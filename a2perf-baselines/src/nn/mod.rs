@@ -121,11 +121,8 @@ impl Linear {
         let dym = MatRef::from_row_major_slice(dy, batch, self.out);
         let xm = MatRef::from_row_major_slice(&x[..batch * self.inp], batch, self.inp);
         {
-            let gw = MatMut::from_row_major_slice_mut(
-                &mut grads[self.w_range()],
-                self.out,
-                self.inp,
-            );
+            let gw =
+                MatMut::from_row_major_slice_mut(&mut grads[self.w_range()], self.out, self.inp);
             matmul(gw, Accum::Add, dym.transpose(), xm, 1.0f32, Par::Seq);
         }
         let gb = &mut grads[self.b_range()];
@@ -136,7 +133,8 @@ impl Linear {
         }
         if let Some(dx) = dx {
             let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
-            let dxm = MatMut::from_row_major_slice_mut(&mut dx[..batch * self.inp], batch, self.inp);
+            let dxm =
+                MatMut::from_row_major_slice_mut(&mut dx[..batch * self.inp], batch, self.inp);
             matmul(dxm, Accum::Replace, dym, wm, 1.0f32, Par::Seq);
         }
     }
@@ -252,7 +250,11 @@ impl Mlp {
         };
         let n = self.layers.len();
         for (i, l) in self.layers.iter().enumerate() {
-            l.init(params, rng, if i + 1 == n { last_gain } else { hidden_gain });
+            l.init(
+                params,
+                rng,
+                if i + 1 == n { last_gain } else { hidden_gain },
+            );
         }
     }
 
@@ -321,8 +323,10 @@ impl Mlp {
             } else {
                 ensure(d_b, batch * layer.inp);
                 layer.backward(params, grads, input, d_a, batch, Some(d_b));
-                self.activation
-                    .backward(&outs[i - 1][..batch * layer.inp], &mut d_b[..batch * layer.inp]);
+                self.activation.backward(
+                    &outs[i - 1][..batch * layer.inp],
+                    &mut d_b[..batch * layer.inp],
+                );
                 std::mem::swap(d_a, d_b);
             }
         }

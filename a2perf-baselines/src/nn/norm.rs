@@ -48,7 +48,9 @@ impl RunningNorm {
             let total = self.count + n as f64;
             let delta = m - self.mean[j];
             self.mean[j] += delta * n as f64 / total;
-            let m2 = self.var[j] * self.count + v * n as f64 + delta * delta * self.count * n as f64 / total;
+            let m2 = self.var[j] * self.count
+                + v * n as f64
+                + delta * delta * self.count * n as f64 / total;
             self.var[j] = m2 / total;
         }
         self.count += n as f64;

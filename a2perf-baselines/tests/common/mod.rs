@@ -58,10 +58,16 @@ impl Env for MaskedBandit {
     }
     fn step_into(&mut self, action: &Action, out: &mut Step) -> Result<(), EnvError> {
         let Action::Discrete(a) = *action else {
-            return Err(EnvError::InvalidAction { action: action.clone(), reason: "discrete".into() });
+            return Err(EnvError::InvalidAction {
+                action: action.clone(),
+                reason: "discrete".into(),
+            });
         };
         if a == self.ctx || a == self.ctx + 1 || a >= 6 {
-            return Err(EnvError::InvalidAction { action: action.clone(), reason: "masked".into() });
+            return Err(EnvError::InvalidAction {
+                action: action.clone(),
+                reason: "masked".into(),
+            });
         }
         out.reward = if a == Self::best(self.ctx) { 1.0 } else { 0.0 };
         out.terminated = true;
@@ -110,7 +116,10 @@ impl Env for Grid {
     }
     fn step_into(&mut self, action: &Action, out: &mut Step) -> Result<(), EnvError> {
         let Action::Discrete(a) = *action else {
-            return Err(EnvError::InvalidAction { action: action.clone(), reason: "discrete".into() });
+            return Err(EnvError::InvalidAction {
+                action: action.clone(),
+                reason: "discrete".into(),
+            });
         };
         let (dr, dc) = [(-1, 0), (1, 0), (0, -1), (0, 1)][a.min(3)];
         self.pos = ((self.pos.0 + dr).clamp(0, 3), (self.pos.1 + dc).clamp(0, 3));
@@ -161,7 +170,10 @@ impl Env for Point {
     }
     fn step_into(&mut self, action: &Action, out: &mut Step) -> Result<(), EnvError> {
         let Action::Continuous(a) = action else {
-            return Err(EnvError::InvalidAction { action: action.clone(), reason: "box".into() });
+            return Err(EnvError::InvalidAction {
+                action: action.clone(),
+                reason: "box".into(),
+            });
         };
         let a = a.first().copied().unwrap_or(0.0).clamp(-1.0, 1.0);
         self.x = (self.x + 0.25 * a).clamp(-5.0, 5.0);
@@ -221,7 +233,15 @@ impl MiniWeb {
     pub fn observation(&self, rng: &mut RngStream) -> Observation {
         let (f, e, t) = (self.f, self.e, self.t);
         let mut tok = |n: usize| -> Vec<f32> {
-            (0..n).map(|i| if i % t < 2 { (1 + rng.index(19)) as f32 } else { 0.0 }).collect()
+            (0..n)
+                .map(|i| {
+                    if i % t < 2 {
+                        (1 + rng.index(19)) as f32
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
         };
         let mut dom_mask = vec![1.0; e];
         dom_mask[e - 1] = 0.0;
@@ -229,22 +249,41 @@ impl MiniWeb {
         if f > 2 {
             profile_mask[f - 1] = 0.0;
         }
-        let obs = Observation {
+        Observation {
             tensors: vec![
-                Tensor { name: "profile_keys".into(), shape: vec![f, t], data: tok(f * t) },
-                Tensor { name: "profile_values".into(), shape: vec![f, t], data: tok(f * t) },
-                Tensor { name: "profile_mask".into(), shape: vec![f], data: profile_mask },
-                Tensor { name: "dom_tokens".into(), shape: vec![e, 5, t], data: tok(e * 5 * t) },
+                Tensor {
+                    name: "profile_keys".into(),
+                    shape: vec![f, t],
+                    data: tok(f * t),
+                },
+                Tensor {
+                    name: "profile_values".into(),
+                    shape: vec![f, t],
+                    data: tok(f * t),
+                },
+                Tensor {
+                    name: "profile_mask".into(),
+                    shape: vec![f],
+                    data: profile_mask,
+                },
+                Tensor {
+                    name: "dom_tokens".into(),
+                    shape: vec![e, 5, t],
+                    data: tok(e * 5 * t),
+                },
                 Tensor {
                     name: "dom_features".into(),
                     shape: vec![e, 8],
                     data: (0..e * 8).map(|_| rng.uniform_f32()).collect(),
                 },
-                Tensor { name: "dom_mask".into(), shape: vec![e], data: dom_mask },
+                Tensor {
+                    name: "dom_mask".into(),
+                    shape: vec![e],
+                    data: dom_mask,
+                },
             ],
             action_mask: None,
-        };
-        obs
+        }
     }
 
     pub fn spec_ref(&self) -> &EnvSpec {
@@ -269,8 +308,16 @@ pub fn mini_circuit_spec() -> EnvSpec {
 pub fn mini_circuit_obs(rng: &mut RngStream) -> Observation {
     Observation {
         tensors: vec![
-            Tensor { name: "features".into(), shape: vec![5], data: (0..5).map(|_| rng.normal() as f32).collect() },
-            Tensor { name: "grid".into(), shape: vec![2, 3, 4], data: (0..24).map(|_| rng.uniform_f32()).collect() },
+            Tensor {
+                name: "features".into(),
+                shape: vec![5],
+                data: (0..5).map(|_| rng.normal() as f32).collect(),
+            },
+            Tensor {
+                name: "grid".into(),
+                shape: vec![2, 3, 4],
+                data: (0..24).map(|_| rng.uniform_f32()).collect(),
+            },
         ],
         action_mask: Some((0..12).map(|i| i % 5 != 0).collect()),
     }
@@ -295,17 +342,27 @@ pub fn train(
 pub fn make_alg(name: &str, overrides: &[(&str, Value)]) -> Box<dyn Algorithm> {
     let mut reg = a2perf_core::Registry::new();
     a2perf_baselines::register(&mut reg);
-    let given: BTreeMap<String, Value> = overrides.iter().map(|(k, v)| (k.to_string(), v.clone())).collect();
-    reg.make_algorithm(name, &given).expect("valid hyperparameters")
+    let given: BTreeMap<String, Value> = overrides
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect();
+    reg.make_algorithm(name, &given)
+        .expect("valid hyperparameters")
 }
 
 /// Mean greedy return over `episodes` episodes.
 pub fn mean_return(env: &mut dyn Env, policy: &mut dyn Policy, episodes: usize) -> f64 {
     (0..episodes)
         .map(|i| {
-            a2perf_core::rollout(env, policy, 10_000 + i as u64, a2perf_core::ActMode::Greedy, false)
-                .expect("rollout")
-                .episode_return
+            a2perf_core::rollout(
+                env,
+                policy,
+                10_000 + i as u64,
+                a2perf_core::ActMode::Greedy,
+                false,
+            )
+            .expect("rollout")
+            .episode_return
         })
         .sum::<f64>()
         / episodes as f64

@@ -168,7 +168,7 @@ impl Buf {
                 }
                 Fb::Structs(bytes, n, align) => {
                     // The elements must be aligned, so the length prefix sits just before.
-                    while (self.0.len() + 4) % align != 0 {
+                    while !(self.0.len() + 4).is_multiple_of(*align) {
                         self.0.push(0);
                     }
                     let p = self.0.len();
@@ -407,7 +407,7 @@ mod tests {
         assert_eq!(&bytes[bytes.len() - 6..], b"ARROW1");
         let n = bytes.len();
         let footer_len = i32::from_le_bytes(bytes[n - 10..n - 6].try_into().unwrap()) as usize;
-        assert!(footer_len > 0 && footer_len % 8 == 0 && footer_len < n);
+        assert!(footer_len > 0 && footer_len.is_multiple_of(8) && footer_len < n);
         // First message: continuation marker, then a metadata length that keeps 8-byte alignment.
         assert_eq!(&bytes[8..12], &[0xff; 4]);
         let meta = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;

@@ -72,8 +72,9 @@ impl Level {
 /// ```
 /// use a2perf_cli::pipeline::collect::{level_of, Level};
 /// assert_eq!(level_of(0.0, 5.0, 2.0, false), Some(Level::Novice));
-/// assert_eq!(level_of(3.5, 5.0, 2.0, false), None);
-/// assert_eq!(level_of(3.5, 5.0, 2.0, true), Some(Level::Intermediate));
+/// assert_eq!(level_of(2.0, 5.0, 2.0, false), None);
+/// assert_eq!(level_of(2.0, 5.0, 2.0, true), Some(Level::Novice));
+/// assert_eq!(level_of(3.5, 5.0, 2.0, false), Some(Level::Intermediate));
 /// assert_eq!(level_of(9.0, 5.0, 2.0, false), Some(Level::Expert));
 /// ```
 pub fn level_of(ret: f64, mu: f64, sigma: f64, one_sigma: bool) -> Option<Level> {

@@ -428,24 +428,32 @@ pub struct SuiteEntry {
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Suite {
-    /// Name, used for the report directory.
+    /// Name (informational).
     #[serde(default)]
-    pub name: Option<String>,
+    pub name: String,
     /// Overrides applied to every experiment (before each entry's own).
     #[serde(default)]
     pub set: Vec<String>,
     /// The experiments.
     pub experiments: Vec<SuiteEntry>,
-    /// Where `a2perf run` writes the report (relative to the working directory).
+    /// Where `a2perf run` writes the report (relative to the working directory; empty = in the
+    /// first experiment's directory).
     #[serde(default)]
-    pub report_dir: Option<String>,
+    pub report_dir: String,
 }
 
-/// Whether RON text is a suite (a top-level `experiments` key) rather than one experiment.
+/// Whether RON text is a suite (an `experiments` key) rather than one experiment.
 fn looks_like_suite(text: &str) -> bool {
-    text.lines()
-        .map(|l| l.split("//").next().unwrap_or("").trim_start())
-        .any(|l| l.starts_with("experiments:") || l.starts_with("experiments :"))
+    let code: String = text
+        .lines()
+        .map(|l| l.split("//").next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n");
+    code.match_indices("experiments").any(|(i, _)| {
+        let before = code[..i].chars().next_back();
+        let after = code[i + "experiments".len()..].trim_start();
+        before.is_none_or(|c| c == '(' || c == ',' || c.is_whitespace()) && after.starts_with(':')
+    })
 }
 
 /// Plans loaded from config files, plus the report directory a suite asks for.
@@ -497,9 +505,11 @@ pub fn load_plans(
                 out.plans
                     .push(load_one(&base.join(&entry.config), overrides)?);
             }
-            if out.report_dir.is_none() {
-                out.report_dir = suite.report_dir.map(PathBuf::from);
-                out.suite_name = suite.name;
+            if out.report_dir.is_none() && !suite.report_dir.is_empty() {
+                out.report_dir = Some(PathBuf::from(&suite.report_dir));
+            }
+            if out.suite_name.is_none() && !suite.name.is_empty() {
+                out.suite_name = Some(suite.name.clone());
             }
         } else {
             out.plans.push(load_one(path, sets.to_vec())?);

@@ -281,7 +281,9 @@ pub fn load_groups(dirs: &[PathBuf]) -> Result<(Vec<Group>, Vec<SkippedRun>)> {
     // apart, labelled `algorithm:experiment`.
     let mut per_pair: BTreeMap<(String, String), usize> = BTreeMap::new();
     for (task, algorithm, _) in groups.keys() {
-        *per_pair.entry((task.clone(), algorithm.clone())).or_default() += 1;
+        *per_pair
+            .entry((task.clone(), algorithm.clone()))
+            .or_default() += 1;
     }
     let mut out = Vec::new();
     for ((task, algorithm, experiment), mut runs) in groups {

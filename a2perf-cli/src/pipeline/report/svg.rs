@@ -21,8 +21,8 @@ fn esc(t: &str) -> String {
 /// Radar chart of one task: one axis per metric that every algorithm has, each scaled to [0, 1]
 /// across the algorithms with "better" pointing outwards (min–max; equal values sit at 1).
 pub fn radar(task: &str, groups: &[&GroupReport]) -> String {
-    let (w, h) = (640.0, 560.0);
-    let (cx, cy, r) = (300.0, 290.0, 190.0);
+    let (w, h) = (760.0, 560.0);
+    let (cx, cy, r) = (320.0, 290.0, 180.0);
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -34,7 +34,7 @@ pub fn radar(task: &str, groups: &[&GroupReport]) -> String {
         r#"<text x="{cx}" y="24" text-anchor="middle" font-size="15">{}</text>"#,
         esc(task)
     );
-    let axes: Vec<(&str, &str, bool)> = groups
+    let axes: Vec<(&str, String, bool)> = groups
         .first()
         .map(|g| {
             g.metrics
@@ -46,7 +46,15 @@ pub fn radar(task: &str, groups: &[&GroupReport]) -> String {
                             .is_some_and(f64::is_finite)
                     })
                 })
-                .map(|m| (m.key.as_str(), m.label.as_str(), m.higher_is_better))
+                .map(|m| {
+                    let phase = match m.category {
+                        super::Category::SystemTraining => "Train. ",
+                        super::Category::SystemInference => "Inf. ",
+                        _ => "",
+                    };
+                    let label = format!("{phase}{}", m.label);
+                    (m.key.as_str(), label, m.higher_is_better)
+                })
                 .collect()
         })
         .unwrap_or_default();
@@ -83,17 +91,23 @@ pub fn radar(task: &str, groups: &[&GroupReport]) -> String {
             s,
             r##"<line x1="{cx}" y1="{cy}" x2="{x:.1}" y2="{y:.1}" stroke="#bbb"/>"##
         );
-        let (lx, ly) = (
-            cx + (r + 22.0) * angle(i).cos(),
-            cy + (r + 22.0) * angle(i).sin(),
+        let (lx, mut ly) = (
+            cx + (r + 16.0) * angle(i).cos(),
+            cy + (r + 16.0) * angle(i).sin(),
         );
-        let anchor = if angle(i).cos() > 0.2 {
+        let anchor = if angle(i).cos() > 0.05 {
             "start"
-        } else if angle(i).cos() < -0.2 {
+        } else if angle(i).cos() < -0.05 {
             "end"
         } else {
             "middle"
         };
+        // Top and bottom labels sit clear of their neighbours.
+        if angle(i).sin() > 0.95 {
+            ly += 10.0;
+        } else if angle(i).sin() < -0.95 {
+            ly -= 4.0;
+        }
         let arrow = if *higher { "↑" } else { "↓" };
         let _ = writeln!(
             s,
@@ -138,7 +152,7 @@ pub fn radar(task: &str, groups: &[&GroupReport]) -> String {
         let ly = 50.0 + 18.0 * gi as f64;
         let _ = writeln!(
             s,
-            r#"<rect x="520" y="{:.0}" width="12" height="12" fill="{color}"/><text x="538" y="{:.0}">{}</text>"#,
+            r#"<rect x="620" y="{:.0}" width="12" height="12" fill="{color}"/><text x="638" y="{:.0}">{}</text>"#,
             ly - 10.0,
             ly,
             esc(&g.algorithm.to_uppercase())
@@ -175,6 +189,7 @@ fn nice_ticks(lo: f64, hi: f64) -> Vec<f64> {
 }
 
 fn tick_label(v: f64) -> String {
+    let v = if v.abs() < 1e-12 { 0.0 } else { v };
     if v != 0.0 && (v.abs() >= 1e5 || v.abs() < 1e-2) {
         format!("{v:.1e}")
     } else if v.fract() == 0.0 {
