@@ -4,11 +4,11 @@ use a2perf_core::Registry;
 
 /// All environments and algorithms shipped with the benchmark.
 pub fn full_registry() -> Registry {
-    #[allow(unused_mut)]
     let mut reg = Registry::new();
     a2perf_web::register(&mut reg);
     a2perf_locomotion::register(&mut reg);
     a2perf_circuit::register(&mut reg);
+    a2perf_baselines::register(&mut reg);
     // DOMAIN-REGISTER (helpers add `a2perf_<domain>::register(&mut reg);` above this line)
     reg
 }

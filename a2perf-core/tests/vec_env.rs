@@ -1,8 +1,8 @@
 //! The vectorised stepper is deterministic: trajectories depend on the seed, not on thread timing.
 
 use a2perf_core::{
-    Action, Env, EnvError, EnvSpec, Observation, RandomPolicy, Policy, RngStream, Space, Step,
-    VecEnv, ActMode,
+    ActMode, Action, Env, EnvError, EnvSpec, Observation, Policy, RandomPolicy, RngStream, Space,
+    Step, VecEnv,
 };
 
 /// A noisy random walk whose episode length and rewards depend on the reset seed.

@@ -585,6 +585,15 @@ fn group_report(group: &Group, opts: &ReportOptions) -> GroupReport {
         .iter()
         .find_map(|r| r.generalization.as_ref().map(|g| g.episodes))
         .unwrap_or(first.generalization.episodes);
+    let failed_task = runs.iter().find_map(|r| {
+        r.generalization.as_ref().and_then(|g| {
+            g.tasks.iter().find_map(|t| {
+                t.error
+                    .as_ref()
+                    .map(|e| format!("task {} failed: {e}", t.name))
+            })
+        })
+    });
     metrics.push(per_seed(
         MetricValue::new(
             Application,
@@ -594,7 +603,9 @@ fn group_report(group: &Group, opts: &ReportOptions) -> GroupReport {
             true,
         ),
         gen_sum,
-        "run `a2perf generalize` first (or a task failed)",
+        failed_task
+            .as_deref()
+            .unwrap_or("run `a2perf generalize` first"),
         Vec::new(),
         reps,
         &mut rng,
@@ -946,6 +957,7 @@ fn comparisons(
             runs: s.len(),
         });
     }
+    iqms.sort_by(|a, b| (&a.task, &a.algorithm).cmp(&(&b.task, &b.algorithm)));
     let algos: std::collections::BTreeSet<&String> = scores.keys().map(|(a, _)| a).collect();
     let mut poi = Vec::new();
     for x in &algos {

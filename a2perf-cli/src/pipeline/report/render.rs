@@ -12,12 +12,14 @@ use super::{Category, Group, GroupReport, MetricValue, Report};
 /// assert_eq!(format_value(12.345), "12.35");
 /// assert_eq!(format_value(0.00123), "1.23e-3");
 /// assert_eq!(format_value(0.0), "0.00");
+/// assert_eq!(format_value(-0.0), "0.00");
 /// ```
 pub fn format_value(v: f64) -> String {
     if v != 0.0 && v.abs() < 1e-2 {
         format!("{v:.2e}")
     } else {
-        format!("{v:.2}")
+        // `-0.00` would suggest a sign the value does not have.
+        format!("{:.2}", if v == 0.0 { 0.0 } else { v })
     }
 }
 
