@@ -1,5 +1,6 @@
 //! The `a2perf` command: lists, benchmarks and (as the pipelines land) trains, infers and reports.
 
+use a2perf_cli::registry;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -9,7 +10,6 @@ mod config_cmd;
 mod locomotion_cmd;
 mod metrics_cmd;
 mod pipeline_cmd;
-mod registry;
 mod web_cmd;
 
 /// A2Perf: a benchmark for autonomous agents on chip placement, web navigation and quadruped

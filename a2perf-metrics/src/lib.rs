@@ -15,7 +15,8 @@
 //! - [`numeric`]: NumPy-compatible percentiles, IQR, CVaR, ranks.
 //! - [`application`]: returns summaries, generalization, training sample cost, expertise levels.
 //! - [`system`]: meters for RAM, CPU/RAM energy (RAPL or CodeCarbon-style estimates), emissions,
-//!   `emissions.csv` and inference time, implementing [`a2perf_core::Meter`].
+//!   `emissions.csv` and inference time, implementing [`a2perf_core::Meter`]; [`gpu`]: GPU
+//!   energy through NVML with the optional `nvml` cargo feature, otherwise reported absent.
 //! - [`csv`]: reading your own curves, rollouts and scores with line-numbered errors.
 //!
 //! ```
@@ -42,6 +43,7 @@ pub mod chan2019_stats;
 pub mod csv;
 pub mod curve;
 pub mod filter;
+pub mod gpu;
 pub mod numeric;
 pub mod rliable;
 pub mod system;

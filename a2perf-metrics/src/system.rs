@@ -24,7 +24,10 @@
 //!   (`Δcpu_time / Δwall / logical_cpus`).
 //! - **RAM power**: CodeCarbon v2's model used by A2Perf's fork: 3 W per 8 GB (0.375 W/GB) of the
 //!   process tree's mean RSS — *estimated*.
-//! - **GPU**: not measured by this build (no NVML binding); reported *absent*, never 0.
+//! - **GPU**: with the `nvml` cargo feature, NVIDIA GPUs through NVML — the device energy counter
+//!   difference, or integrated power samples on GPUs without one (see [`crate::gpu`]); whole-device,
+//!   *measured*, and added to the total. Without the feature, or when NVML cannot be initialised,
+//!   *absent* with the reason, never 0.
 //! - **Emissions**: total energy × PUE × carbon intensity (default 475 g CO₂e/kWh, the IEA 2019
 //!   world average CodeCarbon falls back to) — *estimated*.
 
@@ -37,6 +40,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use a2perf_core::{Measurement, Meter, MeterError, MeterReport, Provenance};
 use sysinfo::{Pid, ProcessRefreshKind, ProcessesToUpdate, System};
 
+use crate::gpu::{self, GpuPhase, GpuSource};
 use crate::numeric;
 
 /// CodeCarbon's µJ→kWh path uses `JOULES_TO_KWH = 2.77778e-7`; we use the exact 1/3.6e6.
@@ -393,6 +397,7 @@ struct PhaseStart {
 pub struct SystemMeter {
     cfg: SystemMeterConfig,
     memory: MemorySampler,
+    gpu: Box<dyn GpuSource>,
     start: Option<PhaseStart>,
     row: Option<EmissionsRow>,
     sys: Option<System>,
@@ -400,12 +405,19 @@ pub struct SystemMeter {
 }
 
 impl SystemMeter {
-    /// A meter with these settings.
+    /// A meter with these settings and the default GPU source ([`gpu::default_source`]: NVML
+    /// with the `nvml` feature, otherwise absent).
     pub fn new(cfg: SystemMeterConfig) -> Self {
+        Self::with_gpu(cfg, gpu::default_source())
+    }
+
+    /// A meter reading GPU energy from `gpu` (see [`crate::gpu`] for an example).
+    pub fn with_gpu(cfg: SystemMeterConfig, gpu: Box<dyn GpuSource>) -> Self {
         let memory = MemorySampler::new(cfg.interval);
         Self {
             cfg,
             memory,
+            gpu,
             start: None,
             row: None,
             sys: None,
@@ -444,6 +456,7 @@ impl Meter for SystemMeter {
             read_rapl(&domains).map(|r| (domains, r))
         };
         self.memory.start()?;
+        self.gpu.start(self.cfg.interval);
         self.start = Some(PhaseStart {
             instant: Instant::now(),
             wall: SystemTime::now(),
@@ -454,7 +467,11 @@ impl Meter for SystemMeter {
     }
 
     fn sample(&mut self) -> Result<(), MeterError> {
-        self.memory.sample()
+        self.memory.sample()?;
+        if self.start.is_some() {
+            self.gpu.sample();
+        }
+        Ok(())
     }
 
     fn finish(&mut self) -> Result<MeterReport, MeterError> {
@@ -462,6 +479,7 @@ impl Meter for SystemMeter {
             .start
             .take()
             .ok_or_else(|| MeterError::NotStarted("system".into()))?;
+        let gpu = self.gpu.finish();
         let mem = self.memory.finish()?;
         let secs = start.instant.elapsed().as_secs_f64().max(1e-9);
         let hours = secs / 3600.0;
@@ -513,17 +531,44 @@ impl Meter for SystemMeter {
             "{} W per GB of mean process RSS (CodeCarbon v2 rule)",
             self.cfg.ram_watts_per_gb
         );
-        let energy = (cpu_energy + ram_energy) * self.cfg.pue;
+        // GPU: CodeCarbon's gpu_power is the phase's mean, ΔE / Δt.
+        let (gpu_energy, gpu_power, [gpu_power_m, gpu_energy_m]) = match &gpu {
+            GpuPhase::Measured(r) => {
+                let p = r.energy_kwh * JOULES_PER_KWH / secs;
+                (
+                    Some(r.energy_kwh),
+                    Some(p),
+                    [
+                        Measurement::measured("gpu_power_w", p, "W"),
+                        Measurement::measured("gpu_energy_kwh", r.energy_kwh, "kWh"),
+                    ],
+                )
+            }
+            GpuPhase::Absent(why) => (
+                None,
+                None,
+                [
+                    Measurement::absent("gpu_power_w", "W", why),
+                    Measurement::absent("gpu_energy_kwh", "kWh", why),
+                ],
+            ),
+        };
+        let energy = (cpu_energy + ram_energy + gpu_energy.unwrap_or(0.0)) * self.cfg.pue;
         let emissions = energy * self.cfg.carbon_intensity_g_per_kwh / 1000.0;
-        let energy_method = format!(
-            "CPU ({}) + RAM (estimated), × PUE {}; GPU not included (absent)",
-            match &cpu_prov {
-                Provenance::Measured => "RAPL",
-                _ => "estimated",
-            },
-            self.cfg.pue
-        );
-        let gpu_why = "GPU power is not measured: this build has no NVML support";
+        let cpu_how = match &cpu_prov {
+            Provenance::Measured => "RAPL",
+            _ => "estimated",
+        };
+        let energy_method = match &gpu {
+            GpuPhase::Measured(r) => format!(
+                "CPU ({cpu_how}) + RAM (estimated) + GPU (measured: {}), × PUE {}",
+                r.method, self.cfg.pue
+            ),
+            GpuPhase::Absent(_) => format!(
+                "CPU ({cpu_how}) + RAM (estimated), × PUE {}; GPU not included (absent)",
+                self.cfg.pue
+            ),
+        };
         let with = |name: &str, v: f64, unit: &str, p: &Provenance| Measurement {
             name: name.into(),
             value: Some(v),
@@ -538,8 +583,8 @@ impl Meter for SystemMeter {
             with("cpu_energy_kwh", cpu_energy, "kWh", &cpu_prov),
             Measurement::estimated("ram_power_w", ram_power, "W", &ram_method),
             Measurement::estimated("ram_energy_kwh", ram_energy, "kWh", &ram_method),
-            Measurement::absent("gpu_power_w", "W", gpu_why),
-            Measurement::absent("gpu_energy_kwh", "kWh", gpu_why),
+            gpu_power_m,
+            gpu_energy_m,
             Measurement::estimated("energy_kwh", energy, "kWh", &energy_method),
             Measurement::estimated(
                 "emissions_kg",
@@ -567,16 +612,24 @@ impl Meter for SystemMeter {
             duration_s: secs,
             emissions_kg: emissions,
             cpu_power_w: cpu_power,
-            gpu_power_w: None,
+            gpu_power_w: gpu_power,
             ram_power_w: ram_power,
             cpu_energy_kwh: cpu_energy,
-            gpu_energy_kwh: None,
+            gpu_energy_kwh: gpu_energy,
             ram_energy_kwh: ram_energy,
             energy_kwh: energy,
             country_iso_code: self.cfg.country_iso_code.clone(),
             region: self.cfg.region.clone(),
             cpu_count: logical,
             cpu_model: cpu_model(),
+            gpu_count: match &gpu {
+                GpuPhase::Measured(r) => Some(r.count),
+                GpuPhase::Absent(_) => None,
+            },
+            gpu_model: match &gpu {
+                GpuPhase::Measured(r) => r.model.clone(),
+                GpuPhase::Absent(_) => String::new(),
+            },
             ram_total_gb: total_ram_gb,
             ram_used_gb: mean_ram,
             pue: self.cfg.pue,
@@ -696,6 +749,10 @@ pub struct EmissionsRow {
     pub cpu_count: usize,
     /// CPU model.
     pub cpu_model: String,
+    /// GPUs measured; `None` when GPU energy is absent (written as an empty field).
+    pub gpu_count: Option<usize>,
+    /// GPU models, CodeCarbon-style (`2 x NVIDIA A100-SXM4-40GB`); empty when absent.
+    pub gpu_model: String,
     /// Machine RAM (GB).
     pub ram_total_gb: f64,
     /// Mean RSS of the process tree (GB).
@@ -747,8 +804,8 @@ impl EmissionsRow {
             String::new(),
             self.cpu_count.to_string(),
             field(&self.cpu_model),
-            String::new(),
-            String::new(),
+            self.gpu_count.map(|n| n.to_string()).unwrap_or_default(),
+            field(&self.gpu_model),
             String::new(),
             String::new(),
             self.ram_total_gb.to_string(),
@@ -776,7 +833,8 @@ impl EmissionsRow {
 ///     experiment_id: String::new(), duration_s: 10.0, emissions_kg: 0.001, cpu_power_w: 20.0,
 ///     gpu_power_w: None, ram_power_w: 1.0, cpu_energy_kwh: 5e-5, gpu_energy_kwh: None,
 ///     ram_energy_kwh: 3e-6, energy_kwh: 5.3e-5, country_iso_code: "USA".into(), region: String::new(),
-///     cpu_count: 2, cpu_model: "cpu".into(), ram_total_gb: 8.0, ram_used_gb: 0.5, pue: 1.0,
+///     cpu_count: 2, cpu_model: "cpu".into(), gpu_count: None, gpu_model: String::new(),
+///     ram_total_gb: 8.0, ram_used_gb: 0.5, pue: 1.0,
 /// };
 /// append_emissions_csv(&path, &row).unwrap();
 /// append_emissions_csv(&path, &row).unwrap();
@@ -926,15 +984,19 @@ mod tests {
         assert_eq!(rapl_delta_uj(before[0], after[0], doms[0].max_uj), 2000);
     }
 
-    #[test]
-    fn gpu_is_absent_not_zero_and_emissions_follow_intensity() {
-        let mut m = SystemMeter::new(SystemMeterConfig {
+    fn quiet_cfg() -> SystemMeterConfig {
+        SystemMeterConfig {
             interval: Duration::from_millis(5),
             force_cpu_tdp_watts: Some(100.0),
             powercap_root: PathBuf::from("/nonexistent"),
             carbon_intensity_g_per_kwh: 1000.0,
             ..SystemMeterConfig::default()
-        });
+        }
+    }
+
+    #[test]
+    fn gpu_is_absent_not_zero_and_emissions_follow_intensity() {
+        let mut m = SystemMeter::with_gpu(quiet_cfg(), Box::new(gpu::NoGpu::new("no GPU here")));
         m.start().unwrap();
         let mut x = 0u64;
         for i in 0..3_000_000u64 {
@@ -955,5 +1017,92 @@ mod tests {
         let row = m.emissions_row().unwrap();
         assert_eq!(row.fields().len(), EMISSIONS_COLUMNS.len());
         assert_eq!(row.fields()[8], "", "gpu_power is empty, not 0");
+    }
+
+    /// A GPU that used a fixed energy per phase, standing in for NVML.
+    struct FakeGpu {
+        started: bool,
+        samples: usize,
+    }
+
+    impl GpuSource for FakeGpu {
+        fn start(&mut self, _interval: Duration) {
+            self.started = true;
+        }
+        fn sample(&mut self) {
+            self.samples += 1;
+        }
+        fn finish(&mut self) -> GpuPhase {
+            assert!(self.started, "finish before start");
+            self.started = false;
+            GpuPhase::Measured(gpu::GpuReading {
+                count: 2,
+                model: "2 x Fake, GPU".into(),
+                energy_kwh: 2e-3,
+                method: format!("fake, {} samples", self.samples),
+            })
+        }
+    }
+
+    #[test]
+    fn measured_gpu_is_reported_added_to_energy_and_written_to_csv() {
+        let cfg = SystemMeterConfig {
+            pue: 1.5,
+            ..quiet_cfg()
+        };
+        let fake = FakeGpu {
+            started: false,
+            samples: 0,
+        };
+        let mut m = SystemMeter::with_gpu(cfg, Box::new(fake));
+        m.start().unwrap();
+        m.sample().unwrap();
+        let r = m.finish().unwrap();
+        let secs = r.value("wall_clock_h").unwrap() * 3600.0;
+        let e = r.get("gpu_energy_kwh").unwrap();
+        assert_eq!(e.value, Some(2e-3));
+        assert_eq!(e.provenance, Provenance::Measured);
+        let p = r.get("gpu_power_w").unwrap();
+        assert_eq!(p.provenance, Provenance::Measured);
+        // Mean power over the phase; the wall clock is measured a moment later, hence the slack.
+        let expected_w = 2e-3 * JOULES_PER_KWH / secs;
+        assert!((p.value.unwrap() / expected_w - 1.0).abs() < 0.05);
+        let parts = r.value("cpu_energy_kwh").unwrap() + r.value("ram_energy_kwh").unwrap() + 2e-3;
+        let total = r.value("energy_kwh").unwrap();
+        assert!(
+            (total - 1.5 * parts).abs() < 1e-15,
+            "{total} vs 1.5 × {parts}"
+        );
+        match &r.get("energy_kwh").unwrap().provenance {
+            Provenance::Estimated(how) => {
+                assert!(how.contains("GPU (measured: fake, 1 samples)"), "{how}")
+            }
+            other => panic!("{other:?}"),
+        }
+        let row = m.emissions_row().unwrap();
+        let f = row.fields();
+        assert_eq!(f[8].parse::<f64>().unwrap(), p.value.unwrap());
+        assert_eq!(f[11].parse::<f64>().unwrap(), 2e-3);
+        assert_eq!(f[25], "2");
+        assert_eq!(f[26], "\"2 x Fake, GPU\"");
+    }
+
+    #[cfg(not(feature = "nvml"))]
+    #[test]
+    fn gpu_default_without_feature_names_the_feature() {
+        let mut m = SystemMeter::new(quiet_cfg());
+        m.start().unwrap();
+        let r = m.finish().unwrap();
+        for name in ["gpu_power_w", "gpu_energy_kwh"] {
+            let g = r.get(name).unwrap();
+            assert_eq!(g.value, None);
+            assert_eq!(
+                g.provenance,
+                Provenance::Absent(gpu::WITHOUT_NVML_FEATURE.into())
+            );
+        }
+        assert!(gpu::WITHOUT_NVML_FEATURE.contains("built without the `nvml` feature"));
+        let row = m.emissions_row().unwrap();
+        assert_eq!((row.gpu_count, row.gpu_model.as_str()), (None, ""));
     }
 }

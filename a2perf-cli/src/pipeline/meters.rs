@@ -1,6 +1,6 @@
 //! The system meters the command-line pipelines use: `a2perf-metrics`' [`SystemMeter`] (RAM
-//! sampler, CPU energy from RAPL or estimated, RAM power model, GPU absent without NVML,
-//! emissions), which also appends a CodeCarbon-style row to `train_emissions.csv` /
+//! sampler, CPU energy from RAPL or estimated, RAM power model, GPU through NVML with the `nvml`
+//! feature and absent otherwise, emissions), which also appends a CodeCarbon-style row to `train_emissions.csv` /
 //! `inference_emissions.csv` in the run directory.
 
 use std::path::{Path, PathBuf};
