@@ -14,7 +14,7 @@ use a2perf_cli::pipeline::{self, TrainOptions, collect::CollectOptions};
 
 fn has_minari(python: &PathBuf) -> bool {
     Command::new(python)
-        .args(["-c", "import minari, pyarrow"])
+        .args(["-c", "import minari, pyarrow, PIL"])
         .output()
         .is_ok_and(|o| o.status.success())
 }
@@ -25,7 +25,10 @@ fn python() -> Result<PathBuf, String> {
         return if has_minari(&p) {
             Ok(p)
         } else {
-            Err(format!("{} cannot import minari and pyarrow", p.display()))
+            Err(format!(
+                "{} cannot import minari, pyarrow and PIL (minari's arrow storage imports it)",
+                p.display()
+            ))
         };
     }
     // CI's interop venv, when it has the arrow extra.
