@@ -43,6 +43,8 @@ impl Default for NetOptions {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CircuitArch {
     features: usize,
+    #[serde(default)]
+    features_dim: usize,
     grid: usize,
     channels: usize,
     cells: usize,
@@ -304,6 +306,46 @@ impl DiscreteNet {
     }
 }
 
+impl CircuitArch {
+    /// Points the network at another netlist's observations. Its parameters depend only on the
+    /// `features` width and the grid's channel count, and it scores any number of cells, so a
+    /// placement policy can run on circuits it was not trained on (the generalization tasks).
+    /// Fails, saying why, when the new layout differs in anything the parameters depend on.
+    pub(crate) fn retarget(&mut self, new: &ObsLayout) -> Result<(), String> {
+        let features = new
+            .index("features")
+            .ok_or("the environment has no `features` tensor")?;
+        let grid = new
+            .index("grid")
+            .ok_or("the environment has no `grid` tensor")?;
+        if new.dim(features) != self.features_dim {
+            return Err(format!(
+                "`features` has {} values, the network was trained on {}",
+                new.dim(features),
+                self.features_dim
+            ));
+        }
+        let shape = &new.tensors[grid].1;
+        let cells: usize = shape.iter().skip(1).product();
+        if shape.len() != 3 || shape[0] != self.channels {
+            return Err(format!(
+                "`grid` has shape {shape:?}, the network needs {} channels",
+                self.channels
+            ));
+        }
+        if new.num_actions != Some(cells) {
+            return Err(format!(
+                "the action space has {:?} actions but the grid {cells} cells",
+                new.num_actions
+            ));
+        }
+        self.features = features;
+        self.grid = grid;
+        self.cells = cells;
+        Ok(())
+    }
+}
+
 fn circuit_arch(
     layout: &ObsLayout,
     opts: &NetOptions,
@@ -330,6 +372,7 @@ fn circuit_arch(
     let value = with_value.then(|| Mlp::new(alloc, &[h, 32, 8, 1], Activation::Relu));
     Some(DiscreteArch::Circuit(CircuitArch {
         features,
+        features_dim: d,
         grid,
         channels,
         cells: n,

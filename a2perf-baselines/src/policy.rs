@@ -341,19 +341,39 @@ impl NetPolicy {
             )));
         }
         let layout = ObsLayout::from_spec(spec)?;
-        if layout != header.layout {
-            return Err(bad(format!(
-                "checkpoint was trained on observations {:?} but environment `{}` produces {:?}",
-                header.layout.tensors, spec.id, layout.tensors
-            )));
+        let mut head_spec = header.head;
+        if layout != header.layout || header.action_space != spec.action_space {
+            // A circuit placement network does not depend on the netlist's size, so it may run on
+            // other circuits; every other network needs exactly the observations it was trained on.
+            match &mut head_spec {
+                HeadSpec::Discrete {
+                    arch: DiscreteArch::Circuit(c),
+                    n,
+                    ..
+                } => {
+                    c.retarget(&layout).map_err(|why| {
+                        bad(format!(
+                            "checkpoint's circuit network cannot run on environment `{}`: {why}",
+                            spec.id
+                        ))
+                    })?;
+                    *n = layout.num_actions.unwrap_or(0);
+                }
+                _ if layout != header.layout => {
+                    return Err(bad(format!(
+                        "checkpoint was trained on observations {:?} but environment `{}` produces {:?}",
+                        header.layout.tensors, spec.id, layout.tensors
+                    )));
+                }
+                _ => {
+                    return Err(bad(format!(
+                        "checkpoint's action space differs from environment `{}`'s",
+                        spec.id
+                    )));
+                }
+            }
         }
-        if header.action_space != spec.action_space {
-            return Err(bad(format!(
-                "checkpoint's action space differs from environment `{}`'s",
-                spec.id
-            )));
-        }
-        let (head, expected) = match header.head {
+        let (head, expected) = match head_spec {
             HeadSpec::Discrete {
                 arch,
                 n,
