@@ -55,9 +55,28 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     if let Err(err) = run(cli) {
-        eprintln!("error: {err:#}");
+        eprintln!("error: {}", error_chain(&err));
         std::process::exit(1);
     }
+}
+
+/// The error and its causes joined by `: `, leaving out a cause whose text the layer above
+/// already printed: the library errors (thiserror) include their source in their own message,
+/// and anyhow's `{:#}` would repeat it.
+fn error_chain(err: &anyhow::Error) -> String {
+    let mut out = String::new();
+    let mut above = String::new();
+    for cause in err.chain() {
+        let msg = cause.to_string();
+        if !above.contains(&msg) {
+            if !out.is_empty() {
+                out.push_str(": ");
+            }
+            out.push_str(&msg);
+        }
+        above = msg;
+    }
+    out
 }
 
 fn run(cli: Cli) -> Result<()> {

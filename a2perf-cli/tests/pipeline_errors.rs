@@ -185,3 +185,27 @@ fn missing_config_file_is_an_error_from_the_binary() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no run directories"));
 }
+
+#[test]
+fn a_cause_is_printed_once() {
+    // The registry's error already includes its cause; the binary must not print it again.
+    let out = Command::new(env!("CARGO_BIN_EXE_a2perf"))
+        .args([
+            "bench",
+            "WebNavigation-Difficulty-01-v0",
+            "--steps",
+            "1",
+            "--set",
+            "num_websites=-1",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        err.matches("expected non-negative integer").count(),
+        1,
+        "{err}"
+    );
+    assert!(err.contains("num_websites"), "{err}");
+}

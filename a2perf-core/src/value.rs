@@ -314,17 +314,33 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
 /// use a2perf_core::did_you_mean;
 /// assert_eq!(did_you_mean("lerning_rate", ["learning_rate", "seed"]), Some("learning_rate".into()));
 /// assert_eq!(did_you_mean("zzz", ["learning_rate"]), None);
+/// // A shortened name is recognised too.
+/// assert_eq!(did_you_mean("netlist", ["netlist_file", "seed"]), Some("netlist_file".into()));
 /// ```
 pub fn did_you_mean<'a>(
     word: &str,
     candidates: impl IntoIterator<Item = &'a str>,
 ) -> Option<String> {
-    candidates
-        .into_iter()
-        .map(|c| (edit_distance(word, c), c))
+    let candidates: Vec<&str> = candidates.into_iter().collect();
+    let typo = candidates
+        .iter()
+        .map(|c| (edit_distance(word, c), *c))
         .filter(|(d, c)| *d <= (c.len().max(word.len()) / 3).max(1))
         .min_by_key(|(d, _)| *d)
-        .map(|(_, c)| c.to_string())
+        .map(|(_, c)| c.to_string());
+    // Otherwise a name that contains the word whole (`netlist` for `netlist_file`); short words
+    // would match too much to be a useful hint.
+    typo.or_else(|| {
+        (word.len() >= 4)
+            .then(|| {
+                candidates
+                    .iter()
+                    .filter(|c| c.contains(word))
+                    .min_by_key(|c| (c.len(), **c))
+                    .map(|c| c.to_string())
+            })
+            .flatten()
+    })
 }
 
 /// Parameters resolved against their specs: every declared key present, defaults filled in, types

@@ -227,6 +227,12 @@ pub trait Statistic: Sync {
     /// Writes its values for `scores` into `out` (`out.len() == self.len()`); `scratch` is a
     /// reusable buffer.
     fn eval(&self, scores: &Scores, scratch: &mut Vec<f64>, out: &mut [f64]);
+    /// `true` when the values depend only on the multiset of scores, not on which run and task
+    /// each score sits in (up to floating-point summation order). The bootstrap then hands
+    /// [`Statistic::eval`] each resample already sorted, which makes order statistics cheap.
+    fn order_free(&self) -> bool {
+        false
+    }
 }
 
 /// The standard aggregates.
@@ -261,6 +267,11 @@ pub struct Aggregates(pub Vec<Aggregate>);
 impl Statistic for Aggregates {
     fn len(&self) -> usize {
         self.0.len()
+    }
+    fn order_free(&self) -> bool {
+        // IQM, optimality gap and the mean (every task has the same number of runs) are
+        // functions of the pooled scores; the median is taken over per-task means.
+        self.0.iter().all(|a| !matches!(a, Aggregate::Median))
     }
     fn eval(&self, scores: &Scores, scratch: &mut Vec<f64>, out: &mut [f64]) {
         for (o, a) in out.iter_mut().zip(&self.0) {
@@ -361,6 +372,58 @@ fn resample_into(src: &Scores, dst: &mut Scores, rng: &mut RngStream, task_boots
     }
 }
 
+/// Stratified resampling that writes each resample in ascending order: a draw only counts how
+/// often each source score was picked, and the sample is then laid out by walking the source
+/// scores in sorted order — a counting sort, with the same draws as [`resample_into`].
+struct SortedResampler {
+    /// Flat source index → position of that score in ascending order.
+    rank: Vec<usize>,
+    /// The source scores in ascending order.
+    sorted: Vec<f64>,
+    /// How often each sorted position was drawn (scratch).
+    counts: Vec<u32>,
+}
+
+impl SortedResampler {
+    fn new(src: &Scores) -> Self {
+        let mut order: Vec<usize> = (0..src.data.len()).collect();
+        order.sort_by(|&a, &b| src.data[a].total_cmp(&src.data[b]).then(a.cmp(&b)));
+        let mut rank = vec![0; order.len()];
+        for (pos, &flat) in order.iter().enumerate() {
+            rank[flat] = pos;
+        }
+        Self {
+            rank,
+            sorted: order.iter().map(|&i| src.data[i]).collect(),
+            counts: vec![0; order.len()],
+        }
+    }
+
+    fn resample(
+        &mut self,
+        src: &Scores,
+        dst: &mut Scores,
+        rng: &mut RngStream,
+        task_bootstrap: bool,
+    ) {
+        self.counts.fill(0);
+        let tasks = src.tasks;
+        for t in 0..tasks {
+            let from_task = if task_bootstrap { rng.index(tasks) } else { t };
+            for _ in 0..src.runs {
+                let from_run = rng.index(src.runs);
+                self.counts[self.rank[from_run * tasks + from_task]] += 1;
+            }
+        }
+        let mut out = dst.data.iter_mut();
+        for (&v, &c) in self.sorted.iter().zip(&self.counts) {
+            for slot in out.by_ref().take(c as usize) {
+                *slot = v;
+            }
+        }
+    }
+}
+
 fn percentile_intervals(reps: &[f64], k: usize, confidence: f64) -> (Vec<f64>, Vec<f64>) {
     let n = reps.len() / k;
     let lo_q = 100.0 * (1.0 - confidence) / 2.0;
@@ -407,8 +470,12 @@ pub fn bootstrap_ci(
             let mut rng = root.derive_index(chunk as u64);
             let mut sample = scores.clone();
             let mut scratch = Vec::with_capacity(scores.data.len());
+            let mut sorter = stat.order_free().then(|| SortedResampler::new(scores));
             for rep_out in out.chunks_exact_mut(k) {
-                resample_into(scores, &mut sample, &mut rng, cfg.task_bootstrap);
+                match sorter.as_mut() {
+                    Some(s) => s.resample(scores, &mut sample, &mut rng, cfg.task_bootstrap),
+                    None => resample_into(scores, &mut sample, &mut rng, cfg.task_bootstrap),
+                }
                 stat.eval(&sample, &mut scratch, rep_out);
             }
         });
@@ -448,4 +515,35 @@ pub fn probability_of_improvement_ci(
         lower,
         upper,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The counting-sort resample is the plain resample, sorted: same draws, same multiset.
+    #[test]
+    fn sorted_resample_is_the_plain_resample_sorted() {
+        let rows: Vec<Vec<f64>> = (0..7)
+            .map(|r| {
+                (0..4)
+                    .map(|t| ((r * 5 + t * 3) % 6) as f64 - 0.5 * t as f64)
+                    .collect()
+            })
+            .collect();
+        let src = Scores::from_rows(&rows).unwrap();
+        for task_bootstrap in [false, true] {
+            let mut sorter = SortedResampler::new(&src);
+            let (mut a, mut b) = (src.clone(), src.clone());
+            let mut rng_a = RngStream::new(3, "test");
+            let mut rng_b = RngStream::new(3, "test");
+            for _ in 0..200 {
+                resample_into(&src, &mut a, &mut rng_a, task_bootstrap);
+                sorter.resample(&src, &mut b, &mut rng_b, task_bootstrap);
+                let mut want = a.data.clone();
+                want.sort_by(f64::total_cmp);
+                assert_eq!(want, b.data);
+            }
+        }
+    }
 }
