@@ -6,7 +6,7 @@ use std::hint::black_box;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use a2perf_core::{Action, Env, Observation, Step};
-use a2perf_locomotion::env::{EnvConfig, LocomotionEnv, MotionSource};
+use a2perf_locomotion::env::{EnvConfig, LocomotionEnv, Mode, MotionSource};
 use a2perf_locomotion::gait::Gait;
 use a2perf_locomotion::{RobotModel, SimConfig, Simulation};
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -25,17 +25,23 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-fn make_with(solver_iterations: usize) -> LocomotionEnv {
+fn make_with(solver_iterations: usize, train: bool) -> LocomotionEnv {
     let mut cfg = EnvConfig::new(
         "QuadrupedLocomotion-DogPace-v0",
         MotionSource::Generated(Gait::Pace),
     );
     cfg.solver_iterations = solver_iterations;
+    if train {
+        // Domain randomisation (incl. the knee-friction motors), full-length episodes.
+        cfg.mode = Mode::Train;
+        cfg.randomize = true;
+        cfg.curriculum_steps = 1.0;
+    }
     LocomotionEnv::new(cfg).unwrap()
 }
 
 fn make() -> LocomotionEnv {
-    make_with(SimConfig::default().solver_iterations)
+    make_with(SimConfig::default().solver_iterations, false)
 }
 
 fn allocations_per_step() {
@@ -71,8 +77,8 @@ fn thread_cpu_ns() -> Option<u64> {
     s.split_whitespace().next()?.parse().ok()
 }
 
-fn cpu_time_throughput(solver_iterations: usize, random: bool) {
-    let mut env = make_with(solver_iterations);
+fn cpu_time_throughput(solver_iterations: usize, random: bool, train: bool) {
+    let mut env = make_with(solver_iterations, train);
     let mut obs = Observation::default();
     env.reset_into(Some(0), &mut obs).unwrap();
     let mut rng = a2perf_core::RngStream::new(0, "bench-actions");
@@ -95,7 +101,12 @@ fn cpu_time_throughput(solver_iterations: usize, random: bool) {
     let cpu = (thread_cpu_ns().unwrap_or(c0) - c0) as f64 * 1e-9;
     let wall = w0.elapsed().as_secs_f64();
     println!(
-        "env steps (DogPace, {} actions, resets included, {solver_iterations} solver iteration(s)): {:.0} per CPU-second ({:.0} substeps/CPU-s), {:.0} per wall-second",
+        "env steps (DogPace, {}, {} actions, resets included, {solver_iterations} solver iteration(s)): {:.0} per CPU-second ({:.0} substeps/CPU-s), {:.0} per wall-second",
+        if train {
+            "train mode + randomisation"
+        } else {
+            "test mode"
+        },
         if random { "uniform random" } else { "zero" },
         n as f64 / cpu,
         n as f64 * 33.0 / cpu,
@@ -105,9 +116,10 @@ fn cpu_time_throughput(solver_iterations: usize, random: bool) {
 
 fn benches(c: &mut Criterion) {
     allocations_per_step();
-    cpu_time_throughput(1, false);
-    cpu_time_throughput(2, false);
-    cpu_time_throughput(1, true);
+    cpu_time_throughput(1, false, false);
+    cpu_time_throughput(2, false, false);
+    cpu_time_throughput(1, true, false);
+    cpu_time_throughput(1, false, true);
     let mut g = c.benchmark_group("locomotion");
     g.sample_size(20);
     let mut env = make();

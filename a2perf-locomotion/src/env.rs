@@ -42,6 +42,10 @@ pub const TARGET_STEPS: [usize; 4] = [1, 2, 10, 30];
 pub const MAX_MOTOR_ANGLE_CHANGE: f64 = 0.2;
 /// Action bound (|a| ≤ 2π).
 pub const ACTION_LIMIT: f64 = 2.0 * PI;
+/// Train-mode knee joint friction range [N·m], sampled per knee at every reset (the reference's
+/// joint-friction randomisation on the foot-link joints, of which only the knees move).
+pub const KNEE_FRICTION_RANGE: (f64, f64) = (0.0, 0.05);
+
 /// Reward weights: pose, velocity, end effector, root pose, root velocity.
 pub const REWARD_WEIGHTS: [f64; 5] = [0.5, 0.05, 0.2, 0.15, 0.1];
 
@@ -92,7 +96,10 @@ pub struct EnvConfig {
     pub ref_state_init_prob: f64,
     /// Observation latency [s] (randomised in train mode).
     pub control_latency: f64,
-    /// Domain randomisation (defaults to on in train mode).
+    /// Domain randomisation, resampled at every reset: mass ×U[0.8, 1.2] and inertia ×U[0.5, 1.5]
+    /// (base and leg groups), motor strength ×U[0.8, 1.2] per motor, latency U[0, 0.04] s, foot
+    /// friction U[0.5, 1.25], knee joint friction [`KNEE_FRICTION_RANGE`] per knee (the
+    /// reference's ranges). The registry turns it on by default in train mode.
     pub randomize: bool,
     /// Rapier solver iterations per physics step.
     pub solver_iterations: usize,
@@ -214,6 +221,9 @@ pub struct LocomotionEnv {
     sim: Simulation,
     motion: ReferenceMotion,
     rng: RngStream,
+    /// Knee-friction draws, a separate stream so that adding them left every other draw (DR
+    /// parameters, start phase) unchanged for a given seed.
+    knee_rng: RngStream,
     history: History,
     filter: ActionFilter,
     prev_filtered: Option<[f64; NUM_MOTORS]>,
@@ -308,6 +318,7 @@ impl LocomotionEnv {
         Ok(Self {
             spec,
             rng: RngStream::new(0, "locomotion-episode"),
+            knee_rng: RngStream::new(0, "locomotion-episode").derive("knee-friction"),
             latency: config.control_latency,
             episode_limit: config.episode_steps,
             config,
@@ -497,6 +508,7 @@ impl LocomotionEnv {
             self.sim.set_mass_scale(1.0, 1.0, 1.0, 1.0);
             self.sim.set_motor_strength([1.0; NUM_MOTORS]);
             self.sim.set_foot_friction(self.model.foot_friction);
+            self.sim.set_knee_friction([0.0; NUM_LEGS]);
             self.latency = self.config.control_latency;
             return;
         }
@@ -506,9 +518,13 @@ impl LocomotionEnv {
         let strength = std::array::from_fn(|_| r.range(0.8, 1.2));
         self.latency = r.range(0.0, 0.04);
         let friction = r.range(0.5, 1.25);
+        let k = &mut self.knee_rng;
+        let knee_friction =
+            std::array::from_fn(|_| k.range(KNEE_FRICTION_RANGE.0, KNEE_FRICTION_RANGE.1));
         self.sim.set_mass_scale(bm, lm, bi, li);
         self.sim.set_motor_strength(strength);
         self.sim.set_foot_friction(friction);
+        self.sim.set_knee_friction(knee_friction);
     }
 
     fn write_obs(&self, out: &mut Observation) {
@@ -608,6 +624,7 @@ impl Env for LocomotionEnv {
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut Observation) -> Result<(), EnvError> {
         if let Some(s) = seed {
             self.rng = RngStream::new(s, "locomotion-episode");
+            self.knee_rng = self.rng.derive("knee-friction");
         }
         if self.config.mode == Mode::Train {
             let s = (self.total_nonterminal_steps as f64 / self.config.curriculum_steps.max(1.0))

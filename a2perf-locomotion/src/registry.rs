@@ -56,7 +56,7 @@ fn common_params() -> Vec<ParamSpec> {
             "randomize",
             ParamKind::Bool,
             Value::Null,
-            "domain randomisation (default: on in train mode)",
+            "domain randomisation of mass, inertia, motor strength, latency, foot friction and knee joint friction (default: on in train mode)",
         ),
         ParamSpec::new(
             "ref_state_init_prob",

@@ -124,6 +124,11 @@ fn mass_props(com: Vector3<f64>, mass: f64, inertia: Vector3<f64>) -> MassProper
     MassProperties::new(to_vec3(&com), mass as f32, to_vec3(&inertia))
 }
 
+/// Velocity-motor gain of the knee friction: large, so that below the friction bound the motor
+/// acts as a (nearly) hard zero-velocity constraint, like PyBullet's velocity motor; rapier's
+/// regularisation is then `1/(dt·gain)` = 0.1% at dt = 1 ms.
+const KNEE_FRICTION_GAIN: f32 = 1.0e6;
+
 /// One actuated joint: parent and child bodies, axis in the parent body frame.
 #[derive(Clone, Copy, Debug)]
 struct Motor {
@@ -152,6 +157,9 @@ pub struct Simulation {
     base: RigidBodyHandle,
     legs: [[RigidBodyHandle; 3]; NUM_LEGS],
     motors: [Motor; NUM_MOTORS],
+    /// Knee (lower-leg) joints, FR, FL, RR, RL, for joint friction.
+    knee_joints: [ImpulseJointHandle; NUM_LEGS],
+    knee_friction: [f64; NUM_LEGS],
     robot_colliders: Vec<(ColliderHandle, LinkKind, usize)>,
     /// Nominal mass properties per body (base, then legs × 3), for randomisation.
     nominal_mass: Vec<(RigidBodyHandle, Vector3<f64>, f64, Vector3<f64>)>,
@@ -216,6 +224,7 @@ impl Simulation {
         ));
 
         let mut legs = [[base; 3]; NUM_LEGS];
+        let mut knee_joints = [ImpulseJointHandle::invalid(); NUM_LEGS];
         let mut motors = [Motor {
             parent: base,
             child: base,
@@ -275,7 +284,10 @@ impl Simulation {
                     .local_anchor2(Vec3::ZERO)
                     .limits([lo as f32, hi as f32])
                     .contacts_enabled(false);
-                impulse_joints.insert(parent, h, joint, true);
+                let jh = impulse_joints.insert(parent, h, joint, true);
+                if k == 2 {
+                    knee_joints[li] = jh;
+                }
                 motors[3 * li + k] = Motor {
                     parent,
                     child: h,
@@ -345,6 +357,8 @@ impl Simulation {
             base,
             legs,
             motors,
+            knee_joints,
+            knee_friction: [0.0; NUM_LEGS],
             robot_colliders,
             nominal_mass,
             strength: [1.0; NUM_MOTORS],
@@ -558,6 +572,35 @@ impl Simulation {
         }
     }
 
+    /// Sets the dry friction torque [N·m] of each knee joint (FR, FL, RR, RL), as the reference's
+    /// randomiser does with a PyBullet velocity motor (target velocity 0, maximum force =
+    /// friction) on the foot-link joints — of which only the knees move.
+    ///
+    /// Modelled the same way: a rapier joint motor driving the knee's relative velocity to zero
+    /// with its torque bounded by the friction. Joints are only touched when a value changes,
+    /// so a world that never sets friction steps exactly as one without this feature; setting
+    /// a knee back to 0 leaves a motor whose torque bound is 0 (no effect).
+    pub fn set_knee_friction(&mut self, friction: [f64; NUM_LEGS]) {
+        for (leg, &f) in friction.iter().enumerate() {
+            let f = f.max(0.0);
+            if f == self.knee_friction[leg] {
+                continue;
+            }
+            self.knee_friction[leg] = f;
+            if let Some(joint) = self.impulse_joints.get_mut(self.knee_joints[leg], false) {
+                joint
+                    .data
+                    .set_motor_velocity(JointAxis::AngX, 0.0, KNEE_FRICTION_GAIN)
+                    .set_motor_max_force(JointAxis::AngX, f as f32);
+            }
+        }
+    }
+
+    /// Current knee joint friction torques [N·m] (FR, FL, RR, RL).
+    pub fn knee_friction(&self) -> [f64; NUM_LEGS] {
+        self.knee_friction
+    }
+
     /// Last applied motor-space torques.
     pub fn torques(&self) -> &[f64; NUM_MOTORS] {
         &self.torques
@@ -587,6 +630,11 @@ impl Simulation {
     }
 
     /// Advances one physics step with no actuation change.
+    ///
+    /// Heap use: rapier 0.36.1 allocates twice inside `PhysicsPipeline::step`, plus once in a
+    /// step where a contact begins or ends, and the next step's first `&mut` body accesses
+    /// (torques in [`Self::step_pd`]) regrow the modified-body list the step dropped (3 more) —
+    /// 5 per PD substep (see the crate README); this crate's own per-step code allocates nothing.
     pub fn step_physics(&mut self) {
         self.pipeline.step(
             self.gravity,

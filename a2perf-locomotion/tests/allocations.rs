@@ -1,0 +1,150 @@
+//! Heap allocations per environment step, counted by a per-thread counting global allocator.
+//!
+//! The crate's own step code allocates nothing. rapier3d 0.36.1 allocates inside
+//! `PhysicsPipeline::step`, which no way of driving it through its public API avoids while the
+//! PD torques stay explicit per-substep body torques (see the crate README, "Allocations"):
+//! - 3 per substep: `RigidBodySet`'s modified-body list is moved out by every step, so the
+//!   first `&mut` accesses to the 13 robot bodies (to set torques) regrow it (capacity 4, 8, 16);
+//! - 1 per substep: `ImpulseJointSet::select_active_interactions` collects its candidate joints
+//!   into a fresh `Vec`, because modifying a jointed body invalidates its memo;
+//! - 1 per substep: the staged island solver's `StageSync::new` builds its per-worker cursor
+//!   `Vec` on every solve, unconditionally;
+//! - 1 per substep in which some contact begins or ends (narrow-phase transition list).
+//!
+//! These tests pin that budget, so that any allocation added to our per-step code (which would
+//! come on top of rapier's) fails them, and print the measured figures.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use a2perf_core::{Action, Env, Observation, Step};
+use a2perf_locomotion::env::{ACTION_REPEAT, EnvConfig, LocomotionEnv, Mode, MotionSource};
+use a2perf_locomotion::gait::{self, Gait};
+use a2perf_locomotion::{RobotModel, SimConfig, Simulation};
+
+struct Counting;
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<usize> = const { Cell::new(0) };
+}
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        if COUNTING.with(Cell::get) {
+            COUNT.with(|c| c.set(c.get() + 1));
+        }
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        if COUNTING.with(Cell::get) {
+            COUNT.with(|c| c.set(c.get() + 1));
+        }
+        unsafe { System.realloc(p, l, n) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) }
+    }
+}
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Allocations (including reallocations) made on this thread by `f`.
+fn count(f: impl FnOnce()) -> usize {
+    COUNT.with(|c| c.set(0));
+    COUNTING.with(|c| c.set(true));
+    f();
+    COUNTING.with(|c| c.set(false));
+    COUNT.with(Cell::get)
+}
+
+/// rapier 0.36.1's floor per physics substep when body torques are set (see the module docs).
+/// Builds with debug assertions add 3: rapier's `NarrowPhase::debug_validate_*` checks of its
+/// solver contact graph, compiled only then.
+const RAPIER_PER_SUBSTEP: usize = if cfg!(debug_assertions) { 8 } else { 5 };
+
+/// Allocations per env step over `steps` zero-action steps after a warm-up, standing still on
+/// the default pose (constant contacts, no episode end).
+fn standing_allocations(mode: Mode, randomize: bool, steps: usize) -> f64 {
+    let clip = gait::standing_clip(&RobotModel::builtin());
+    let mut cfg = EnvConfig::new("stand", MotionSource::Clip(clip));
+    cfg.ref_state_init_prob = 1.0;
+    cfg.mode = mode;
+    cfg.randomize = randomize;
+    cfg.episode_steps = 10_000;
+    cfg.curriculum_steps = 1.0;
+    let mut env = LocomotionEnv::new(cfg).unwrap();
+    let mut obs = Observation::default();
+    env.reset_into(Some(0), &mut obs).unwrap();
+    let action = Action::Continuous(vec![0.0; 12]);
+    let mut step = Step::default();
+    // Train mode's curriculum ends the first episode after 20 steps; the next one is full length.
+    for _ in 0..30 {
+        env.step_into(&action, &mut step).unwrap();
+        if step.done() {
+            env.reset_into(None, &mut obs).unwrap();
+        }
+    }
+    let n = count(|| {
+        for _ in 0..steps {
+            env.step_into(&action, &mut step).unwrap();
+            assert!(!step.done(), "{:?}", env.last_termination());
+        }
+    });
+    n as f64 / steps as f64
+}
+
+#[test]
+fn env_step_allocates_only_rapiers_per_substep_floor() {
+    let budget = (RAPIER_PER_SUBSTEP * ACTION_REPEAT) as f64;
+    for (mode, randomize) in [(Mode::Test, false), (Mode::Train, true)] {
+        let per_step = standing_allocations(mode, randomize, 200);
+        eprintln!("{mode:?}: {per_step:.2} allocations per env step (budget {budget})");
+        assert!(per_step <= budget, "{mode:?}: {per_step} > {budget}");
+    }
+}
+
+#[test]
+fn walking_adds_at_most_one_allocation_per_substep_for_contact_changes() {
+    let mut env =
+        LocomotionEnv::new(EnvConfig::new("trot", MotionSource::Generated(Gait::Trot))).unwrap();
+    let mut obs = Observation::default();
+    env.reset_into(Some(2), &mut obs).unwrap();
+    let mut step = Step::default();
+    let action = Action::Continuous(vec![0.0; 12]);
+    env.step_into(&action, &mut step).unwrap();
+    let mut steps = 0usize;
+    let n = count(|| {
+        for _ in 0..10 {
+            env.step_into(&action, &mut step).unwrap();
+            steps += 1;
+            if step.done() {
+                break;
+            }
+        }
+    });
+    let per_step = n as f64 / steps as f64;
+    eprintln!("walking: {per_step:.2} allocations per env step over {steps} steps");
+    assert!(per_step <= ((RAPIER_PER_SUBSTEP + 1) * ACTION_REPEAT) as f64);
+}
+
+#[test]
+fn the_rapier_floor_is_in_the_physics_substep() {
+    // One bare PD substep of the world (no env code) already costs the floor, which is what
+    // the env step budget above is made of.
+    let model = RobotModel::builtin();
+    let mut sim = Simulation::new(&model, SimConfig::default());
+    let target = model.default_motor_angles();
+    for _ in 0..50 {
+        sim.step_pd(&target);
+    }
+    let n = count(|| {
+        for _ in 0..100 {
+            sim.step_pd(&target);
+        }
+    });
+    eprintln!("{:.2} allocations per physics substep", n as f64 / 100.0);
+    assert!(n <= 100 * RAPIER_PER_SUBSTEP);
+    assert!(
+        n >= 100 * (RAPIER_PER_SUBSTEP - 1),
+        "fewer allocations than expected: update the documented budget"
+    );
+}
