@@ -7,6 +7,7 @@
 use std::path::Path;
 use std::time::Instant;
 
+use a2perf_circuit::placer::{FdSchedule, FdScratch, place_std_cells};
 use a2perf_circuit::{
     CircuitEnv, CircuitEnvConfig, CostSettings, GeneratorConfig, Netlist, Placement, PlacementCost,
     SoftMacroRule, generate,
@@ -74,6 +75,14 @@ fn main() {
     measure("incremental move only", 5000, || {
         let m = hard[rng.index(hard.len())];
         cost.place_at_cell(m, rng.index(c * r));
+    });
+    // The standard-cell placer alone, on this placement's hard macros.
+    let mut scratch = FdScratch::default();
+    let schedule = FdSchedule::default();
+    let mut placed = cost.clone();
+    measure("FD standard-cell placer alone", 10, || {
+        placed.clone_from(&cost);
+        place_std_cells(&mut placed, &schedule, &mut scratch);
     });
     for (label, fd) in [
         ("episode, 133 macros + FD placer", true),

@@ -9,7 +9,7 @@
 //! Smoothing and the top-k means are recomputed per query from preallocated scratch buffers.
 
 use crate::netlist::{Netlist, NodeKind, Orientation};
-use crate::plc::{Placement, PlcEntry, PlcHeader};
+use crate::plc::{Blockage, Placement, PlcEntry, PlcHeader};
 
 /// Errors building or updating a [`PlacementCost`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -244,6 +244,41 @@ pub struct CostBreakdown {
     pub proxy_cost: f64,
 }
 
+/// `v.floor()` without the libm call (x86-64's baseline has no `roundsd`, so `f64::floor` is a
+/// function call; this sits on the per-pin hot path). Exact for every input.
+#[inline]
+pub(crate) fn floor_f64(v: f64) -> f64 {
+    // Beyond 2^52 every f64 is an integer (and NaN/inf pass through unchanged).
+    if v.abs() < 4_503_599_627_370_496.0 {
+        let t = v as i64 as f64;
+        if t == v {
+            v
+        } else if t > v {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        v
+    }
+}
+
+/// `floor(v)` saturated to ±1e12 as an integer (NaN → 0), exactly as
+/// `v.floor().clamp(-1e12, 1e12) as i64`.
+#[inline]
+fn floor_i64(v: f64) -> i64 {
+    if (-1e12..=1e12).contains(&v) {
+        let t = v as i64;
+        t - ((t as f64) > v) as i64
+    } else if v > 0.0 {
+        1_000_000_000_000
+    } else if v < 0.0 {
+        -1_000_000_000_000
+    } else {
+        0 // NaN
+    }
+}
+
 /// Grid geometry helper.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Grid {
@@ -277,14 +312,7 @@ impl Grid {
     /// `floor(x/gw)`), saturated to a sane range.
     #[inline]
     fn raw_cell(&self, x: f64, y: f64) -> (i64, i64) {
-        let f = |v: f64| {
-            if v.is_nan() {
-                0
-            } else {
-                v.floor().clamp(-1e12, 1e12) as i64
-            }
-        };
-        (f(y / self.gh), f(x / self.gw))
+        (floor_i64(y / self.gh), floor_i64(x / self.gw))
     }
 
     /// Cell rectangle covered by a box, plc_client_os style (None when it lies below/left).
@@ -296,13 +324,13 @@ impl Grid {
         xmax: f64,
         ymax: f64,
     ) -> Option<(usize, usize, usize, usize)> {
-        let ur_r = (ymax / self.gh).floor();
-        let ur_c = (xmax / self.gw).floor();
+        let ur_r = floor_f64(ymax / self.gh);
+        let ur_c = floor_f64(xmax / self.gw);
         if !(ur_r >= 0.0 && ur_c >= 0.0) {
             return None;
         }
-        let bl_r = (ymin / self.gh).floor().max(0.0);
-        let bl_c = (xmin / self.gw).floor().max(0.0);
+        let bl_r = floor_f64(ymin / self.gh).max(0.0);
+        let bl_c = floor_f64(xmin / self.gw).max(0.0);
         if bl_r.is_nan() || bl_c.is_nan() {
             return None;
         }
@@ -360,6 +388,11 @@ pub struct PlacementCost {
     pub(crate) pin_ox: Vec<f64>,
     pub(crate) pin_oy: Vec<f64>,
     pub(crate) pin_rot: Vec<bool>,
+    // Offsets in the owner's current orientation (−0.0 for pins at the owner's centre, so that
+    // `x + offset` is exactly `x`); refreshed when an orientation changes.
+    pub(crate) pin_rdx: Vec<f64>,
+    pub(crate) pin_rdy: Vec<f64>,
+    pub(crate) offsets_dirty: bool,
     pub(crate) pin_x: Vec<f64>,
     pub(crate) pin_y: Vec<f64>,
     pub(crate) pin_cell: Vec<(i64, i64)>,
@@ -371,15 +404,22 @@ pub struct PlacementCost {
     // Objects with area, in density order (soft macros, hard macros, standard cells).
     pub(crate) area_nodes: Vec<u32>,
     pub(crate) hard_macros: Vec<u32>,
+    // Blockage rectangles `[minx, miny, maxx, maxy]` that hard macros may not overlap.
+    pub(crate) macro_blockages: Vec<[f64; 4]>,
+    pub(crate) blockages: Vec<Blockage>,
     // Grids.
     pub(crate) occupied: Vec<f64>,
     pub(crate) h_net: Vec<f64>,
+    // Column-major (`col·rows + row`), so that a vertical run is contiguous.
     pub(crate) v_net: Vec<f64>,
     pub(crate) h_macro: Vec<f64>,
     pub(crate) v_macro: Vec<f64>,
     pub(crate) macro_dirty: bool,
     // Scratch.
     pub(crate) cells: Vec<(i64, i64)>,
+    // Per congestion cell: generation of the last net that touched it (distinct-cell sets).
+    pub(crate) stamp: Vec<u32>,
+    pub(crate) stamp_gen: u32,
     pub(crate) h_tot: Vec<f64>,
     pub(crate) v_tot: Vec<f64>,
     pub(crate) sort_buf: Vec<f64>,
@@ -564,6 +604,9 @@ impl PlacementCost {
             pin_ox,
             pin_oy,
             pin_rot,
+            pin_rdx: vec![-0.0; npins],
+            pin_rdy: vec![-0.0; npins],
+            offsets_dirty: true,
             pin_x: vec![0.0; npins],
             pin_y: vec![0.0; npins],
             pin_cell: vec![(0, 0); npins],
@@ -573,6 +616,8 @@ impl PlacementCost {
             node_nets,
             area_nodes,
             hard_macros,
+            macro_blockages: Vec::new(),
+            blockages: Vec::new(),
             occupied: vec![0.0; pcells],
             h_net: vec![0.0; ccells],
             v_net: vec![0.0; ccells],
@@ -580,6 +625,8 @@ impl PlacementCost {
             v_macro: vec![0.0; ccells],
             macro_dirty: true,
             cells: Vec::with_capacity(64),
+            stamp: vec![0; ccells],
+            stamp_gen: 0,
             h_tot: vec![0.0; ccells],
             v_tot: vec![0.0; ccells],
             sort_buf: Vec::with_capacity(2 * ccells),
@@ -666,10 +713,51 @@ impl PlacementCost {
         &self.hard_macros
     }
 
-    /// Applies a `.plc` placement (positions, orientations, fixed flags).
+    /// Sets the placement blockages (`# Blockage : minx miny maxx maxy rate`).
+    ///
+    /// As circuit_training documents them (`placement_util`: rate 0.1 = "not macro overlap but
+    /// allow stdcells", 0.99 = "no macros or stdcells", 1.0 = rectilinear floorplan), every
+    /// blockage with a positive rate forbids hard-macro overlap: [`PlacementCost::node_mask`]
+    /// masks each cell where the macro's footprint would overlap one with positive area
+    /// (touching allowed). A rate of 0 blocks nothing. Blockages do not enter the wirelength,
+    /// density or congestion costs (plc_client_os, which matches Google's costs, ignores them
+    /// there) nor our force-directed placer.
+    ///
+    /// ```
+    /// use a2perf_circuit::{generate, Blockage, GeneratorConfig, PlacementCost};
+    /// let g = generate(&GeneratorConfig::small(), 0);
+    /// let mut cost = PlacementCost::new(&g.netlist, g.settings.clone()).unwrap();
+    /// let (w, h) = (g.settings.canvas_width, g.settings.canvas_height);
+    /// // Block the whole canvas: no cell is legal for any hard macro.
+    /// cost.set_blockages(&[Blockage { rect: [0.0, 0.0, w, h, 1.0] }]);
+    /// let m = cost.hard_macros()[0] as usize;
+    /// let (c, r) = cost.grid();
+    /// let mut mask = vec![false; c * r];
+    /// cost.node_mask(m, &mut mask);
+    /// assert!(mask.iter().all(|legal| !legal));
+    /// ```
+    pub fn set_blockages(&mut self, blockages: &[Blockage]) {
+        self.blockages = blockages.to_vec();
+        self.macro_blockages = blockages
+            .iter()
+            .filter(|b| b.rect[4] > 0.0 && b.rect[..4].iter().all(|v| v.is_finite()))
+            .map(|b| [b.rect[0], b.rect[1], b.rect[2], b.rect[3]])
+            .collect();
+    }
+
+    /// The blockages in force.
+    pub fn blockages(&self) -> &[Blockage] {
+        &self.blockages
+    }
+
+    /// Applies a `.plc` placement (positions, orientations, fixed flags, and its header's
+    /// blockages when it has any).
     pub fn apply_placement(&mut self, plc: &Placement) -> Result<(), CostError> {
         for e in &plc.entries {
             self.check_entry(e)?;
+        }
+        if !plc.header.blockages.is_empty() {
+            self.set_blockages(&plc.header.blockages);
         }
         for e in &plc.entries {
             self.x[e.index] = e.x;
@@ -678,6 +766,7 @@ impl PlacementCost {
                 && self.kind[e.index] == NodeKind::HardMacro
             {
                 self.orient[e.index] = o;
+                self.offsets_dirty = true;
             }
             self.fixed[e.index] = e.fixed || self.kind[e.index] == NodeKind::Port;
             self.placed[e.index] = true;
@@ -729,19 +818,20 @@ impl PlacementCost {
         p
     }
 
+    /// Re-derives pin `p`'s offset from its owner's orientation.
     #[inline]
-    pub(crate) fn pin_pos(&self, p: usize) -> (f64, f64) {
-        let o = self.pin_owner[p] as usize;
+    fn refresh_offset(&mut self, p: usize) {
         if self.pin_rot[p] {
-            let (dx, dy) = self.orient[o].apply(self.pin_ox[p], self.pin_oy[p]);
-            (self.x[o] + dx, self.y[o] + dy)
-        } else {
-            (self.x[o], self.y[o])
+            let o = self.pin_owner[p] as usize;
+            (self.pin_rdx[p], self.pin_rdy[p]) =
+                self.orient[o].apply(self.pin_ox[p], self.pin_oy[p]);
         }
     }
 
+    #[inline]
     fn update_pin(&mut self, p: usize) {
-        let (px, py) = self.pin_pos(p);
+        let o = self.pin_owner[p] as usize;
+        let (px, py) = (self.x[o] + self.pin_rdx[p], self.y[o] + self.pin_rdy[p]);
         self.pin_x[p] = px;
         self.pin_y[p] = py;
         self.pin_cell[p] = self.cgrid.raw_cell(px, py);
@@ -755,11 +845,21 @@ impl PlacementCost {
             f64::INFINITY,
             f64::NEG_INFINITY,
         );
-        for p in s..e {
-            x0 = x0.min(self.pin_x[p]);
-            x1 = x1.max(self.pin_x[p]);
-            y0 = y0.min(self.pin_y[p]);
-            y1 = y1.max(self.pin_y[p]);
+        // Plain comparisons (NaN pins are ignored, as by f64::min/max) are much cheaper than the
+        // NaN-aware f64::min/max sequences.
+        for (&px, &py) in self.pin_x[s..e].iter().zip(&self.pin_y[s..e]) {
+            if px < x0 {
+                x0 = px;
+            }
+            if px > x1 {
+                x1 = px;
+            }
+            if py < y0 {
+                y0 = py;
+            }
+            if py > y1 {
+                y1 = py;
+            }
         }
         (x1 - x0).abs() + (y1 - y0).abs()
     }
@@ -780,6 +880,51 @@ impl PlacementCost {
             }
             return;
         }
+        let w = sign * self.net_cw[n];
+        // Only the set of distinct cells (and the driver's) matters: every edge of a net adds the
+        // same `w`, so the order in which its edges are routed cannot change a cell's sum.
+        // Fast path, all pins on the grid: distinct cells via generation stamps, no sorting.
+        let (cols, rows) = (self.cgrid.cols, self.cgrid.rows);
+        self.stamp_gen = self.stamp_gen.wrapping_add(1);
+        if self.stamp_gen == 0 {
+            self.stamp.iter_mut().for_each(|v| *v = 0);
+            self.stamp_gen = 1;
+        }
+        let gen_ = self.stamp_gen;
+        let mut cells = std::mem::take(&mut self.cells);
+        cells.clear();
+        let mut on_grid = true;
+        for &c in &self.pin_cell[s..e] {
+            if (c.0 as u64) >= rows as u64 || (c.1 as u64) >= cols as u64 {
+                on_grid = false;
+                break;
+            }
+            let k = c.0 as usize * cols + c.1 as usize;
+            if self.stamp[k] != gen_ {
+                self.stamp[k] = gen_;
+                cells.push(c);
+            }
+        }
+        if on_grid {
+            // `cells[0]` is the driver's cell.
+            let src = cells[0];
+            match cells.len() {
+                0 | 1 => {}
+                2 => self.two_pin(src, cells[1], w),
+                3 => {
+                    let mut g = [cells[0], cells[1], cells[2]];
+                    self.three_pin(&mut g, w);
+                }
+                _ => {
+                    for &t in &cells[1..] {
+                        self.two_pin(src, t, w);
+                    }
+                }
+            }
+            self.cells = cells;
+            return;
+        }
+        self.cells = cells;
         let mut cells = std::mem::take(&mut self.cells);
         cells.clear();
         for p in s..e {
@@ -788,7 +933,6 @@ impl PlacementCost {
         let src = cells[0];
         cells.sort_unstable();
         cells.dedup();
-        let w = sign * self.net_cw[n];
         match cells.len() {
             0 | 1 => {}
             2 => {
@@ -810,47 +954,111 @@ impl PlacementCost {
         self.cells = cells;
     }
 
-    /// Python-style index into a list of `n` cells.
-    #[inline]
-    fn py_index(idx: i64, n: i64) -> Option<usize> {
-        if (0..n).contains(&idx) {
-            Some(idx as usize)
-        } else if (-n..0).contains(&idx) {
-            Some((n + idx) as usize)
+    /// Adds `w` to the H cells `(row, c)`, `c ∈ [c0, c1)`, at flat index `row·C + c` with Python
+    /// list semantics (negative indices from the end, others out of range skipped).
+    #[inline(always)]
+    fn add_h(&mut self, row: i64, c0: i64, c1: i64, w: f64) {
+        let (cols, rows) = (self.cgrid.cols as i64, self.cgrid.rows as i64);
+        if (0..rows).contains(&row) && c0 >= 0 && c1 <= cols {
+            // Inside the grid (the common case): one contiguous run.
+            let base = (row * cols) as usize;
+            if c0 < c1 {
+                for v in &mut self.h_net[base + c0 as usize..base + c1 as usize] {
+                    *v += w;
+                }
+            }
         } else {
-            None
+            self.add_h_wrapped(row, c0, c1, w);
         }
     }
 
-    #[inline]
-    fn add_h(&mut self, row: i64, c0: i64, c1: i64, w: f64) {
-        let cols = self.cgrid.cols as i64;
+    #[inline(never)]
+    fn add_h_wrapped(&mut self, row: i64, c0: i64, c1: i64, w: f64) {
+        if c0 >= c1 {
+            return;
+        }
         let n = self.h_net.len() as i64;
-        let base = row.saturating_mul(cols);
-        // Only columns whose flat index can be valid (in [-n, n)).
-        let lo = c0.max(-n - base);
-        let hi = c1.min(n - base);
-        for c in lo..hi {
-            if let Some(i) = Self::py_index(base + c, n) {
-                self.h_net[i] += w;
+        let base = row.saturating_mul(self.cgrid.cols as i64);
+        let lo = c0.max((-n).saturating_sub(base));
+        let hi = c1.min(n.saturating_sub(base));
+        if lo >= hi {
+            return;
+        }
+        // Now −n ≤ a < b ≤ n; the negative part comes first, as in ascending `c`.
+        let (a, b) = (base + lo, base + hi);
+        if a < 0 {
+            for v in &mut self.h_net[(n + a) as usize..(n + b.min(0)) as usize] {
+                *v += w;
+            }
+        }
+        if b > 0 {
+            for v in &mut self.h_net[a.max(0) as usize..b as usize] {
+                *v += w;
             }
         }
     }
 
-    #[inline]
+    /// Adds `w` to the V cells `(r, col)`, `r ∈ [r0, r1)`, with the same index semantics.
+    #[inline(always)]
     fn add_v(&mut self, col: i64, r0: i64, r1: i64, w: f64) {
+        let (cols, rows) = (self.cgrid.cols as i64, self.cgrid.rows as i64);
+        if (0..cols).contains(&col) && r0 >= 0 && r1 <= rows {
+            // Inside the grid (the common case).
+            let base = (col * rows) as usize;
+            for v in &mut self.v_net[base + r0 as usize..base + r1 as usize] {
+                *v += w;
+            }
+        } else {
+            self.add_v_wrapped(col, r0, r1, w);
+        }
+    }
+
+    #[inline(never)]
+    fn add_v_wrapped(&mut self, col: i64, r0: i64, r1: i64, w: f64) {
+        if r0 >= r1 {
+            return;
+        }
         let cols = self.cgrid.cols as i64;
         let n = self.v_net.len() as i64;
-        let lo = r0.max((-n - col).div_euclid(cols) - 1);
-        let hi = r1.min((n - col).div_euclid(cols) + 1);
-        for r in lo..hi {
-            if let Some(i) = Self::py_index(r * cols + col, n) {
-                self.v_net[i] += w;
+        let ceil_div = |a: i64| -((-a).div_euclid(cols));
+        // Rows whose flat index is in [−n, 0) (wrapped) precede those in [0, n).
+        let parts = [
+            (ceil_div(-n - col), (-1 - col).div_euclid(cols) + 1, n),
+            (ceil_div(-col), (n - 1 - col).div_euclid(cols) + 1, 0),
+        ];
+        for (lo, hi, off) in parts {
+            let (lo, hi) = (lo.max(r0), hi.min(r1));
+            if lo >= hi {
+                continue;
+            }
+            let rows = self.cgrid.rows as i64;
+            for r in lo..hi {
+                // Flat row-major index → the (row, col) it designates → column-major slot.
+                let flat = r * cols + col + off;
+                let (fr, fc) = (flat / cols, flat % cols);
+                self.v_net[(fc * rows + fr) as usize] += w;
             }
         }
     }
 
+    #[inline(always)]
     fn two_pin(&mut self, s: (i64, i64), t: (i64, i64), w: f64) {
+        let (cols, rows) = (self.cgrid.cols, self.cgrid.rows);
+        let inside = |c: (i64, i64)| (c.0 as u64) < rows as u64 && (c.1 as u64) < cols as u64;
+        if inside(s) && inside(t) {
+            // Both cells on the grid (the common case): no index wrapping to consider.
+            let base = s.0 as usize * cols;
+            let (c0, c1) = (s.1.min(t.1) as usize, s.1.max(t.1) as usize);
+            for v in &mut self.h_net[base + c0..base + c1] {
+                *v += w;
+            }
+            let (r0, r1) = (s.0.min(t.0) as usize, s.0.max(t.0) as usize);
+            let base = t.1 as usize * rows;
+            for v in &mut self.v_net[base + r0..base + r1] {
+                *v += w;
+            }
+            return;
+        }
         self.add_h(s.0, s.1.min(t.1), s.1.max(t.1), w);
         self.add_v(t.1, s.0.min(t.0), s.0.max(t.0), w);
     }
@@ -909,8 +1117,27 @@ impl PlacementCost {
 
     /// Recomputes every cached quantity from the positions.
     pub fn recompute(&mut self) {
-        for p in 0..self.pin_owner.len() {
-            self.update_pin(p);
+        if self.offsets_dirty {
+            for p in 0..self.pin_owner.len() {
+                self.refresh_offset(p);
+            }
+            self.offsets_dirty = false;
+        }
+        let g = self.cgrid;
+        let (x, y) = (&self.x[..], &self.y[..]);
+        for (((((&o, &dx), &dy), px), py), cell) in self
+            .pin_owner
+            .iter()
+            .zip(&self.pin_rdx)
+            .zip(&self.pin_rdy)
+            .zip(&mut self.pin_x)
+            .zip(&mut self.pin_y)
+            .zip(&mut self.pin_cell)
+        {
+            let o = o as usize;
+            *px = x[o] + dx;
+            *py = y[o] + dy;
+            *cell = g.raw_cell(*px, *py);
         }
         self.h_net.iter_mut().for_each(|v| *v = 0.0);
         self.v_net.iter_mut().for_each(|v| *v = 0.0);
@@ -944,7 +1171,13 @@ impl PlacementCost {
 
     /// Changes node `i`'s orientation (hard macros), updating incrementally.
     pub fn set_orientation(&mut self, i: usize, o: Orientation) {
-        self.change_node(i, |me| me.orient[i] = o);
+        self.change_node(i, |me| {
+            me.orient[i] = o;
+            for k in me.node_pin_start[i] as usize..me.node_pin_start[i + 1] as usize {
+                let p = me.node_pins[k] as usize;
+                me.refresh_offset(p);
+            }
+        });
     }
 
     /// Places node `i` at the centre of placement-grid `cell`.
@@ -1122,15 +1355,15 @@ impl PlacementCost {
         self.v_tot.iter_mut().for_each(|v| *v = 0.0);
         for r in 0..g.rows {
             for c in 0..g.cols {
-                let raw = self.v_net[r * g.cols + c];
+                let raw = self.v_net[c * g.rows + r];
                 if raw == 0.0 {
                     continue;
                 }
                 let lp = c.saturating_sub(k);
                 let rp = (c + k).min(g.cols - 1);
                 let val = (raw / vr) / (rp - lp + 1) as f64;
-                for p in lp..=rp {
-                    self.v_tot[r * g.cols + p] += val;
+                for t in &mut self.v_tot[r * g.cols + lp..=r * g.cols + rp] {
+                    *t += val;
                 }
             }
         }
@@ -1143,8 +1376,10 @@ impl PlacementCost {
                 let lp = r.saturating_sub(k);
                 let up = (r + k).min(g.rows - 1);
                 let val = (raw / hr) / (up - lp + 1) as f64;
-                for p in lp..=up {
-                    self.h_tot[p * g.cols + c] += val;
+                let mut i = lp * g.cols + c;
+                for _ in lp..=up {
+                    self.h_tot[i] += val;
+                    i += g.cols;
                 }
             }
         }
@@ -1235,13 +1470,22 @@ impl PlacementCost {
                 out[r * g.cols + c] = (area - w * h).abs() <= 1e-8;
             }
         }
-        for &m in &self.hard_macros {
-            let m = m as usize;
-            if m == i || !self.placed[m] {
-                continue;
-            }
-            let (pxmin, pxmax) = (self.x[m] - self.w[m] / 2.0, self.x[m] + self.w[m] / 2.0);
-            let (pymin, pymax) = (self.y[m] - self.h[m] / 2.0, self.y[m] + self.h[m] / 2.0);
+        let placed_macros = self
+            .hard_macros
+            .iter()
+            .map(|&m| m as usize)
+            .filter(|&m| m != i && self.placed[m])
+            .map(|m| {
+                [
+                    self.x[m] - self.w[m] / 2.0,
+                    self.y[m] - self.h[m] / 2.0,
+                    self.x[m] + self.w[m] / 2.0,
+                    self.y[m] + self.h[m] / 2.0,
+                ]
+            });
+        for [pxmin, pymin, pxmax, pymax] in
+            placed_macros.chain(self.macro_blockages.iter().copied())
+        {
             // Candidate ranges from the separable predicate, widened by one and checked exactly.
             let c_lo = (((pxmin - w / 2.0) / g.gw - 0.5).floor() - 1.0).max(0.0) as usize;
             let c_hi = (((pxmax + w / 2.0) / g.gw - 0.5).ceil() + 1.0)
@@ -1285,6 +1529,9 @@ impl PlacementCost {
         ];
         let _ = g;
         if (overlap(canvas, me) - w * h).abs() > 1e-8 {
+            return false;
+        }
+        if self.macro_blockages.iter().any(|b| overlap(*b, me) > 0.0) {
             return false;
         }
         self.hard_macros.iter().all(|&m| {

@@ -137,6 +137,11 @@ pub struct CircuitEnv {
     dens: Vec<f64>,
     xcost: Vec<f64>,
     ycost: Vec<f64>,
+    // Per placement cell: its congestion-grid cell and its block of the downsampled feature
+    // maps (fixed for the env; integer divisions per cell and step are slow).
+    cell_ccell: Vec<u32>,
+    cell_block: Vec<u16>,
+    block_counts: [u32; FEATURE_MAP * FEATURE_MAP],
 }
 
 fn bad_param(name: &str, reason: impl Into<String>) -> EnvError {
@@ -333,6 +338,20 @@ impl CircuitEnv {
             metadata,
         };
         let n = cost.num_nodes();
+        let (ccols, crows) = cost.congestion_grid();
+        let fm = FEATURE_MAP;
+        let mut cell_ccell = Vec::with_capacity(cols * rows);
+        let mut cell_block = Vec::with_capacity(cols * rows);
+        let mut block_counts = [0u32; FEATURE_MAP * FEATURE_MAP];
+        for cell in 0..cols * rows {
+            let (r, c) = (cell / cols, cell % cols);
+            let cr = (r * crows / rows).min(crows - 1);
+            let cc = (c * ccols / cols).min(ccols - 1);
+            cell_ccell.push((cr * ccols + cc) as u32);
+            let b = (r * fm / rows) * fm + c * fm / cols;
+            cell_block.push(b as u16);
+            block_counts[b] += 1;
+        }
         let base_x = (0..n).map(|i| cost.position(i).0).collect();
         let base_y = (0..n).map(|i| cost.position(i).1).collect();
         Ok(Self {
@@ -352,6 +371,9 @@ impl CircuitEnv {
             dens: Vec::new(),
             xcost: vec![0.0; cols],
             ycost: vec![0.0; rows],
+            cell_ccell,
+            cell_block,
+            block_counts,
         })
     }
 
@@ -466,8 +488,11 @@ impl CircuitEnv {
         for (k, st) in self.static_tensors.iter().enumerate() {
             let idx = names_shapes.len() + k;
             if let Some(t) = obs.tensors.get_mut(idx) {
-                if t.name != st.name || t.shape != st.shape || t.data != st.data {
+                // Copying is cheaper than comparing f32 data element by element.
+                if t.name != st.name || t.shape != st.shape || t.data.len() != st.data.len() {
                     t.clone_from(st);
+                } else {
+                    t.data.copy_from_slice(&st.data);
                 }
             } else {
                 obs.tensors.push(st.clone());
@@ -475,7 +500,6 @@ impl CircuitEnv {
         }
         // Density and congestion per cell (congestion on the congestion grid mapped by centre).
         self.cost.density_cells(&mut self.dens);
-        let (ccols, crows) = self.cost.congestion_grid();
         let (cw, ch) = {
             let s = self.cost.settings();
             (s.canvas_width, s.canvas_height)
@@ -483,10 +507,7 @@ impl CircuitEnv {
         let (hmap, vmap) = self.cost.congestion_maps();
         let grid_t = &mut obs.tensors[1].data;
         for cell in 0..g {
-            let (r, c) = (cell / cols, cell % cols);
-            let cr = (r * crows / rows).min(crows - 1);
-            let cc = (c * ccols / cols).min(ccols - 1);
-            let ci = cr * ccols + cc;
+            let ci = self.cell_ccell[cell] as usize;
             grid_t[cell] = self.dens[cell] as f32;
             grid_t[g + cell] = ((hmap[ci] + vmap[ci]) / 2.0) as f32;
             grid_t[2 * g + cell] = if self.mask[cell] { 1.0 } else { 0.0 };
@@ -532,18 +553,12 @@ impl CircuitEnv {
             .sum();
         feat[5] = (remaining / (cw * ch)) as f32;
         let fm = FEATURE_MAP;
-        let mut counts = [0u32; FEATURE_MAP * FEATURE_MAP];
-        for cell in 0..g {
-            let (r, c) = (cell / cols, cell % cols);
-            let b = (r * fm / rows) * fm + c * fm / cols;
-            counts[b] += 1;
-        }
+        let counts = &self.block_counts;
         let grid_ref = &obs.tensors[1].data;
         let mut dmap = [0f32; FEATURE_MAP * FEATURE_MAP];
         let mut cmap = [0f32; FEATURE_MAP * FEATURE_MAP];
         for cell in 0..g {
-            let (r, c) = (cell / cols, cell % cols);
-            let b = (r * fm / rows) * fm + c * fm / cols;
+            let b = self.cell_block[cell] as usize;
             dmap[b] += grid_ref[cell];
             cmap[b] += grid_ref[g + cell];
         }

@@ -5,7 +5,8 @@
 //! - [`Netlist`]: the protobuf-text netlist format (plain or gzipped), with implicit nets and
 //!   attributes rounded to `f32` as Google's binary does; [`Placement`]: `.plc` files.
 //! - [`PlacementCost`]: wirelength, density and congestion exactly as the reference, with
-//!   incremental updates when one node moves, and the legality mask.
+//!   incremental updates when one node moves, and the legality mask (which honours `.plc`
+//!   blockages; they do not enter the costs, as in the reference).
 //! - [`placer`]: a deterministic force-directed standard-cell placer (ours; Google's is closed).
 //! - [`generator`]: seeded synthetic netlists for tasks that need no files.
 //! - [`env`]: the `CircuitTraining-*` environments and [`register`].

@@ -1,8 +1,8 @@
 //! Invariants: incremental == full recompute, mask ⇔ legality, round trips, no panics.
 
 use a2perf_circuit::{
-    CostBreakdown, GeneratorConfig, Netlist, NodeKind, Orientation, Placement, PlacementCost,
-    SoftMacroRule, generate,
+    Blockage, CostBreakdown, GeneratorConfig, Netlist, NodeKind, Orientation, Placement,
+    PlacementCost, SoftMacroRule, generate,
 };
 use proptest::prelude::*;
 
@@ -70,8 +70,21 @@ proptest! {
     }
 
     #[test]
-    fn mask_matches_legality(seed in 0u64..4, placed in prop::collection::vec(0usize..256, 0..10)) {
+    fn mask_matches_legality(
+        seed in 0u64..4,
+        placed in prop::collection::vec(0usize..256, 0..10),
+        blockages in prop::collection::vec(
+            (0.0f64..1.0, 0.0f64..1.0, 0.0f64..0.5, 0.0f64..0.5, prop::sample::select(vec![0.0, 0.1, 0.99, 1.0])),
+            0..3,
+        ),
+    ) {
         let (netlist, mut cost) = small_cost(seed);
+        let (w, h) = (cost.settings().canvas_width, cost.settings().canvas_height);
+        let blockages: Vec<Blockage> = blockages
+            .iter()
+            .map(|&(x, y, bw, bh, rate)| Blockage { rect: [x * w, y * h, (x + bw) * w, (y + bh) * h, rate] })
+            .collect();
+        cost.set_blockages(&blockages);
         let hard: Vec<usize> = netlist.indices_of(NodeKind::HardMacro);
         for &h in &hard {
             cost.set_placed(h, false);
