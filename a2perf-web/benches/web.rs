@@ -5,7 +5,10 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use a2perf_core::{Action, Env, Observation, RngStream, Step};
-use a2perf_web::{BackendKind, WebNavConfig, WebNavEnv, chromium_available};
+use a2perf_web::{
+    BackendKind, ChromiumOptions, TreeMemory, WebNavConfig, WebNavEnv, chromium_available,
+    other_browser_processes,
+};
 use criterion::{Criterion, criterion_group, criterion_main};
 
 /// Picks the oracle action 3 times in 4, a random legal one otherwise (chosen outside the timing).
@@ -91,10 +94,47 @@ fn simulated(c: &mut Criterion) {
     }
 }
 
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_default()
+}
+
+fn print_memory(label: &str, m: &TreeMemory) {
+    let mib = |b: u64| b as f64 / 1048576.0;
+    println!(
+        "{label}: PSS {:.1} MiB = {:.1} MB (anon {:.1}, file {:.1}, shmem {:.1} MiB) over {} \
+         processes; USS {:.1} MiB; summed RSS {:.1} MiB",
+        mib(m.pss_bytes),
+        m.pss_bytes as f64 / 1e6,
+        mib(m.pss_anon_bytes),
+        mib(m.pss_file_bytes),
+        mib(m.pss_shmem_bytes),
+        m.processes,
+        mib(m.uss_bytes),
+        mib(m.rss_bytes)
+    );
+}
+
 fn chromium(c: &mut Criterion) {
     if let Err(e) = chromium_available() {
         println!("SKIP chromium benches: {e}");
         return;
+    }
+    let opts = ChromiumOptions::from_env();
+    println!(
+        "chromium: {} with extra flags {:?}; load average {}",
+        opts.chromium.display(),
+        opts.extra_args,
+        load_average()
+    );
+    let others = other_browser_processes();
+    if !others.is_empty() {
+        println!(
+            "WARNING: {} Chromium/chromedriver processes of other programs are running; they share \
+             code pages with ours, so the lone-environment PSS below comes out too low",
+            others.len()
+        );
     }
     let mut cfg = WebNavConfig::new(1);
     cfg.backend = BackendKind::Chromium;
@@ -125,20 +165,16 @@ fn chromium(c: &mut Criterion) {
         percentile(&mut resets, 0.5),
         percentile(&mut resets, 0.9),
     );
-    let mib = |b: u64| b as f64 / 1048576.0;
+    // RAM of an environment = PSS summed over chromedriver + every Chromium process it started
+    // (TreeMemory's documentation says why). A lone environment pays for all of Chromium's code
+    // pages it touched: that is what a user running one environment sees.
     for (when, m) in [
-        ("after launch", mem0),
-        ("after ~1300 steps + 50 resets", mem1),
+        ("after launch + first reset", mem0),
+        ("after 1,200 steps + 50 resets", mem1),
     ] {
-        println!(
-            "chromium memory {when}: {} processes, PSS {:.0} MiB, USS {:.0} MiB, summed RSS {:.0} MiB",
-            m.processes,
-            mib(m.pss_bytes),
-            mib(m.uss_bytes),
-            mib(m.rss_bytes)
-        );
+        print_memory(&format!("RAM of one environment, lone, {when}"), &m);
     }
-    // RAM per environment when several run side by side (PSS splits shared code pages fairly).
+    // Several side by side: Chromium's code pages are split between them.
     let n = 4u64;
     let mut envs: Vec<WebNavEnv> = (0..n)
         .map(|i| {
@@ -151,15 +187,23 @@ fn chromium(c: &mut Criterion) {
     for e in envs.iter_mut() {
         timed_steps(e, 300, 5);
     }
-    let ms: Vec<_> = envs
+    let ms: Vec<TreeMemory> = envs
         .iter_mut()
         .map(|e| e.chromium().unwrap().memory())
         .collect();
-    println!(
-        "chromium memory per environment ({n} environments, 300 steps each): PSS {:.0} MiB, USS {:.0} MiB, summed RSS {:.0} MiB",
-        mib(ms.iter().map(|m| m.pss_bytes).sum::<u64>() / n),
-        mib(ms.iter().map(|m| m.uss_bytes).sum::<u64>() / n),
-        mib(ms.iter().map(|m| m.rss_bytes).sum::<u64>() / n)
+    let per = |f: fn(&TreeMemory) -> u64| ms.iter().map(f).sum::<u64>() / n;
+    let avg = TreeMemory {
+        processes: ms.iter().map(|m| m.processes).sum::<usize>() / n as usize,
+        rss_bytes: per(|m| m.rss_bytes),
+        pss_bytes: per(|m| m.pss_bytes),
+        pss_anon_bytes: per(|m| m.pss_anon_bytes),
+        pss_file_bytes: per(|m| m.pss_file_bytes),
+        pss_shmem_bytes: per(|m| m.pss_shmem_bytes),
+        uss_bytes: per(|m| m.uss_bytes),
+    };
+    print_memory(
+        &format!("RAM per environment, {n} side by side, 300 steps each"),
+        &avg,
     );
     for e in envs.iter_mut() {
         e.close().unwrap();
@@ -179,6 +223,7 @@ fn chromium(c: &mut Criterion) {
     });
     group.finish();
     env.close().unwrap();
+    println!("load average at the end: {}", load_average());
 }
 
 criterion_group!(benches, simulated, chromium);

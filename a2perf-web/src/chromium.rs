@@ -3,6 +3,15 @@
 //! Everything is hand-written on `std::net`: a keep-alive HTTP/1.1 client for chromedriver and a
 //! tiny HTTP server that serves the current episode's page on 127.0.0.1. One `execute/sync` call
 //! per step runs the page's `a2p.step`, which applies the action and returns the new state.
+//!
+//! The browser is Debian's `chromium-headless-shell` (the "old headless" build, no full-browser
+//! layer) when it is installed, else Debian's full `chromium`; both give identical pages, and
+//! the parity tests pass with either. The headless shell with [`LEAN_FLAGS`] keeps a lone
+//! environment under 200 MiB (about 160 MiB PSS for chromedriver + browser after the first
+//! reset, 172–177 MiB after 1,200 steps, up to 191 MiB = 200 MB in a 10,000-step run on a
+//! heavily loaded machine); the full browser touches about 235 MiB of its own code alone, so no
+//! flag brings it under 200 MB (about 330 MiB with [`LEAN_FLAGS`]' memory flags; it runs with
+//! [`FULL_BROWSER_FLAGS`]). [`TreeMemory`] defines the measurement.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
@@ -35,33 +44,86 @@ pub const CHROMIUM_FLAGS: [&str; 8] = [
     "--disable-sync",
 ];
 
-/// Extra flags that cut memory (renderer, GPU and network service in the browser process; no
-/// extensions; a small JS heap limit) without changing what pages compute. Measured on 4
-/// environments: about 190 MiB PSS per environment instead of about 300 MiB with 10 processes.
-/// `--single-process` is a Chromium debugging mode; the parity, crash and shutdown tests run with
-/// it. Set `A2PERF_CHROMIUM_ARGS=""` to use Chromium's normal process model.
-pub const LEAN_FLAGS: [&str; 4] = [
+/// Extra flags that cut memory without changing what pages compute (the parity, crash-restart
+/// and shutdown tests run with them). Measured one by one on a lone environment (PSS of
+/// chromedriver + browser, see [`TreeMemory`]; the table is in the crate README):
+///
+/// - `--single-process`, `--no-zygote`: browser, renderer, GPU and network service in one
+///   process. Chromium's normal model (5–10 processes) costs 35–80 MiB more; it is a debugging
+///   mode upstream, but one page on 127.0.0.1 is all it runs here.
+/// - `--disable-software-rasterizer`: no SwiftShader GPU emulation (≈ 15 MiB).
+/// - `--enable-low-end-device-mode`: Chromium's memory-saving caches and heap settings (≈ 7 MiB).
+/// - `--enable-begin-frame-control` (headless shell): frames are produced only on request, and
+///   nobody requests one, so nothing is painted or rastered; layout still runs whenever the
+///   step script reads geometry (≈ 5 MiB, and a faster step).
+/// - `--window-size=400,300`: the 375 px page fits; smaller compositor surfaces.
+/// - `--js-flags`: 1 MiB semi-spaces and a 32 MiB old generation (the page's JS heap uses about
+///   6 MB). Without a cap the heap grows when the machine is loaded and garbage collection lags
+///   (217 MiB instead of ≈ 175 MiB after 1,200 steps with 64 MiB at load average 12); with
+///   16 MiB the browser crashed (most likely out of JS heap; reported as interrupted) in 2 of 4
+///   parity runs at load average 14–20, with 32 MiB in none of 5.
+/// - `--disable-extensions`: nothing to load.
+///
+/// `A2PERF_CHROMIUM_ARGS` replaces this list (whitespace-separated, quotes group a value with
+/// spaces, see [`split_args`]); `A2PERF_CHROMIUM_ARGS=""` gives Chromium's normal process model.
+pub const LEAN_FLAGS: [&str; 8] = [
+    "--single-process",
+    "--no-zygote",
+    "--disable-extensions",
+    "--disable-software-rasterizer",
+    "--enable-low-end-device-mode",
+    "--enable-begin-frame-control",
+    "--window-size=400,300",
+    "--js-flags=--max-old-space-size=32 --max-semi-space-size=1",
+];
+
+/// The default extra flags for the full `chromium` browser (the headless shell gets
+/// [`LEAN_FLAGS`]). The full browser cannot get under 200 MB with any flag (its own code is
+/// ≈ 235 MiB), and its single-process V8 heap also holds its built-in pages (15 MB in use, it
+/// crashed with a 16 MiB old generation); it keeps this longer-tested set (≈ 360 MiB for a lone
+/// environment).
+pub const FULL_BROWSER_FLAGS: [&str; 4] = [
     "--single-process",
     "--no-zygote",
     "--disable-extensions",
     "--js-flags=--max-old-space-size=64",
 ];
 
+/// The default extra flags for the browser `binary`: [`LEAN_FLAGS`] for a headless shell,
+/// [`FULL_BROWSER_FLAGS`] for a full browser.
+///
+/// ```
+/// use a2perf_web::chromium::{FULL_BROWSER_FLAGS, LEAN_FLAGS, lean_flags};
+/// use std::path::Path;
+/// assert_eq!(lean_flags(Path::new("/usr/lib/chromium/chromium-headless-shell")), LEAN_FLAGS);
+/// assert_eq!(lean_flags(Path::new("/usr/bin/chromium")), FULL_BROWSER_FLAGS);
+/// ```
+pub fn lean_flags(binary: &Path) -> Vec<String> {
+    let flags: &[&str] = if browser_name(binary) == "chrome" {
+        &FULL_BROWSER_FLAGS
+    } else {
+        &LEAN_FLAGS
+    };
+    flags.iter().map(|f| f.to_string()).collect()
+}
+
 /// Where the browser and driver binaries are.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ChromiumOptions {
-    /// The Chromium binary.
+    /// The Chromium binary (a file name containing `headless`, such as
+    /// `chromium-headless-shell`, is driven as chromedriver's `chrome-headless-shell`).
     pub chromium: PathBuf,
     /// The chromedriver binary.
     pub chromedriver: PathBuf,
-    /// Flags added after [`CHROMIUM_FLAGS`] (default [`LEAN_FLAGS`]; `A2PERF_CHROMIUM_ARGS`,
-    /// space-separated, replaces them).
+    /// Flags added after [`CHROMIUM_FLAGS`] (default [`lean_flags`]; `A2PERF_CHROMIUM_ARGS`,
+    /// split by [`split_args`], replaces them). Where a flag repeats, the last one counts.
     pub extra_args: Vec<String>,
 }
 
 impl ChromiumOptions {
-    /// `A2PERF_CHROMIUM` / `A2PERF_CHROMEDRIVER`, else Debian's `/usr/bin/chromium` and
-    /// `/usr/bin/chromedriver`.
+    /// `A2PERF_CHROMIUM` / `A2PERF_CHROMEDRIVER`, else Debian's headless shell
+    /// (`/usr/lib/chromium/chromium-headless-shell`, package `chromium-headless-shell`), else
+    /// `/usr/bin/chromium`, and `/usr/bin/chromedriver`.
     pub fn from_env() -> Self {
         let pick = |var: &str, candidates: &[&str]| {
             std::env::var_os(var).map(PathBuf::from).unwrap_or_else(|| {
@@ -72,23 +134,26 @@ impl ChromiumOptions {
                     .unwrap_or_else(|| PathBuf::from(candidates[0]))
             })
         };
+        let chromium = pick(
+            "A2PERF_CHROMIUM",
+            &[
+                "/usr/lib/chromium/chromium-headless-shell",
+                "/usr/bin/chromium-headless-shell",
+                "/usr/bin/chromium",
+                "/usr/bin/chromium-browser",
+                "/usr/bin/google-chrome",
+            ],
+        );
         Self {
-            chromium: pick(
-                "A2PERF_CHROMIUM",
-                &[
-                    "/usr/bin/chromium",
-                    "/usr/bin/chromium-browser",
-                    "/usr/bin/google-chrome",
-                ],
-            ),
             chromedriver: pick(
                 "A2PERF_CHROMEDRIVER",
                 &["/usr/bin/chromedriver", "/usr/lib/chromium/chromedriver"],
             ),
             extra_args: match std::env::var("A2PERF_CHROMIUM_ARGS") {
-                Ok(s) => s.split_whitespace().map(String::from).collect(),
-                Err(_) => LEAN_FLAGS.iter().map(|s| s.to_string()).collect(),
+                Ok(s) => split_args(&s),
+                Err(_) => lean_flags(&chromium),
             },
+            chromium,
         }
     }
 
@@ -97,13 +162,62 @@ impl ChromiumOptions {
         for p in [&self.chromium, &self.chromedriver] {
             if !p.exists() {
                 return Err(WebError::BrowserUnavailable(format!(
-                    "{} not found (install Debian's chromium and chromium-driver, or set \
-                     A2PERF_CHROMIUM / A2PERF_CHROMEDRIVER)",
+                    "{} not found (install Debian's chromium-driver and chromium-headless-shell \
+                     or chromium, or set A2PERF_CHROMIUM / A2PERF_CHROMEDRIVER)",
                     p.display()
                 )));
             }
         }
         Ok(())
+    }
+}
+
+/// Splits a flag list at whitespace outside quotes (`'…'` or `"…"`, quotes removed), so that a
+/// value with spaces such as `--js-flags="--a=1 --b=2"` stays one argument.
+///
+/// ```
+/// use a2perf_web::chromium::split_args;
+/// assert_eq!(
+///     split_args(r#"--x  --js-flags="--a=1 --b=2" 'c d'"#),
+///     ["--x", "--js-flags=--a=1 --b=2", "c d"]
+/// );
+/// ```
+pub fn split_args(s: &str) -> Vec<String> {
+    let (mut out, mut cur, mut quote, mut open) = (Vec::new(), String::new(), None, false);
+    for c in s.chars() {
+        match (quote, c) {
+            (Some(q), c) if c == q => quote = None,
+            (Some(_), c) => cur.push(c),
+            (None, '"' | '\'') => {
+                quote = Some(c);
+                open = true;
+            }
+            (None, c) if c.is_whitespace() => {
+                if open {
+                    out.push(std::mem::take(&mut cur));
+                    open = false;
+                }
+            }
+            (None, c) => {
+                cur.push(c);
+                open = true;
+            }
+        }
+    }
+    if open {
+        out.push(cur);
+    }
+    out
+}
+
+/// chromedriver's name for the browser behind `binary`: the headless shell opens no page at
+/// start and chromedriver only waits for one when told it is not the full browser.
+fn browser_name(binary: &Path) -> &'static str {
+    let name = binary.file_name().map(|n| n.to_string_lossy().into_owned());
+    if name.is_some_and(|n| n.contains("headless")) {
+        "chrome-headless-shell"
+    } else {
+        "chrome"
     }
 }
 
@@ -378,6 +492,52 @@ fn processes_with(needle: &str) -> Vec<u32> {
     out
 }
 
+/// Parent pid and start time (clock ticks after boot) of a live process; `None` for zombies and
+/// processes that are gone.
+fn proc_stat(pid: u32) -> Option<(u32, u64)> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // Fields after the parenthesised command name: state, ppid, ..., starttime (20th).
+    let mut f = s.rsplit_once(')')?.1.split_whitespace();
+    if matches!(f.next(), Some("Z" | "X") | None) {
+        return None;
+    }
+    let ppid = f.next()?.parse().ok()?;
+    let start = f.nth(17)?.parse().ok()?;
+    Some((ppid, start))
+}
+
+/// `roots` and every live descendant of theirs. The process tree matters because not every
+/// Chromium child carries the profile directory on its command line (the headless shell's
+/// renderer and GPU processes do not).
+fn with_descendants(roots: &[u32]) -> Vec<u32> {
+    let mut table: Vec<(u32, u32)> = Vec::new();
+    if let Ok(dir) = std::fs::read_dir("/proc") {
+        for e in dir.flatten() {
+            if let Some(pid) = e.file_name().to_str().and_then(|s| s.parse::<u32>().ok())
+                && let Some((ppid, _)) = proc_stat(pid)
+            {
+                table.push((pid, ppid));
+            }
+        }
+    }
+    let mut out: Vec<u32> = roots
+        .iter()
+        .copied()
+        .filter(|&r| table.iter().any(|&(p, _)| p == r))
+        .collect();
+    let mut k = 0;
+    while k < out.len() {
+        let parent = out[k];
+        for &(p, pp) in &table {
+            if pp == parent && !out.contains(&p) {
+                out.push(p);
+            }
+        }
+        k += 1;
+    }
+    out
+}
+
 fn proc_status_kb(pid: u32, key: &str) -> u64 {
     std::fs::read_to_string(format!("/proc/{pid}/status"))
         .ok()
@@ -389,33 +549,123 @@ fn proc_status_kb(pid: u32, key: &str) -> u64 {
         .unwrap_or(0)
 }
 
-fn smaps_kb(pid: u32, keys: &[&str]) -> u64 {
-    std::fs::read_to_string(format!("/proc/{pid}/smaps_rollup"))
-        .map(|s| {
-            s.lines()
-                .filter(|l| keys.iter().any(|k| l.starts_with(k)))
-                .filter_map(|l| {
-                    l.split_whitespace()
-                        .nth(1)
-                        .and_then(|v| v.parse::<u64>().ok())
-                })
-                .sum()
-        })
-        .unwrap_or(0)
+/// The `smaps_rollup` fields of one process, in kB.
+#[derive(Clone, Copy, Default)]
+struct Rollup {
+    pss: u64,
+    pss_anon: u64,
+    pss_file: u64,
+    pss_shmem: u64,
+    private: u64,
 }
 
-/// Memory of a browser process tree.
+fn rollup(pid: u32) -> Rollup {
+    let mut r = Rollup::default();
+    let Ok(text) = std::fs::read_to_string(format!("/proc/{pid}/smaps_rollup")) else {
+        return r;
+    };
+    for l in text.lines() {
+        let mut it = l.split_whitespace();
+        let (Some(key), Some(v)) = (it.next(), it.next().and_then(|v| v.parse::<u64>().ok()))
+        else {
+            continue;
+        };
+        match key {
+            "Pss:" => r.pss += v,
+            "Pss_Anon:" => r.pss_anon += v,
+            "Pss_File:" => r.pss_file += v,
+            "Pss_Shmem:" => r.pss_shmem += v,
+            "Private_Clean:" | "Private_Dirty:" => r.private += v,
+            _ => {}
+        }
+    }
+    r
+}
+
+/// Memory of one environment's browser: chromedriver plus every Chromium process of its
+/// session, read from `/proc/<pid>/status` and `/proc/<pid>/smaps_rollup`.
+///
+/// **The figure we report as "RAM of an environment" is [`pss_bytes`](Self::pss_bytes)**: the
+/// proportional set size summed over that whole process tree. A page mapped by k processes counts
+/// 1/k in each, so the sum over the tree is what the tree holds, with the pages it shares with
+/// processes *outside* the tree (other environments' Chromium code, libc) split fairly. For a
+/// **lone** environment — the case of a user running one — nothing else maps Chromium's binary,
+/// so the tree pays for every code page it touched; that is the figure the < 200 MB target is
+/// about. With N environments side by side, the binary's pages are split N ways and the
+/// per-environment PSS is lower. [`uss_bytes`](Self::uss_bytes) (private pages only) is a lower
+/// bound that stays the same however many environments run; summed RSS counts a page once per
+/// process that maps it and overstates the tree. The breakdown into anonymous (heaps, JS),
+/// file-backed (mostly the Chromium binary's code and data) and shared-memory pages says where
+/// the memory goes. Measure only when no unrelated Chromium runs on the machine
+/// ([`other_browser_processes`]), else the lone figure comes out too low.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TreeMemory {
     /// Number of processes (chromedriver + Chromium's).
     pub processes: usize,
     /// Sum of resident set sizes, bytes (counts shared pages once per process).
     pub rss_bytes: u64,
-    /// Sum of proportional set sizes, bytes (shared pages split between sharers).
+    /// Sum of proportional set sizes, bytes (shared pages split between sharers): the reported
+    /// "RAM of the environment".
     pub pss_bytes: u64,
+    /// Anonymous part of [`pss_bytes`](Self::pss_bytes) (heaps, JS, stacks).
+    pub pss_anon_bytes: u64,
+    /// File-backed part of [`pss_bytes`](Self::pss_bytes) (binary and library pages).
+    pub pss_file_bytes: u64,
+    /// Shared-memory part of [`pss_bytes`](Self::pss_bytes) (Chromium's IPC buffers between
+    /// its processes).
+    pub pss_shmem_bytes: u64,
     /// Sum of unique (private clean + dirty) set sizes, bytes: what this session alone holds;
-    /// the browser's code pages are shared with other sessions and excluded.
+    /// pages shared with any other process, inside or outside the tree, are excluded.
     pub uss_bytes: u64,
+}
+
+impl TreeMemory {
+    /// The memory of the processes `pids` (those that have exited count 0).
+    pub fn of(pids: &[u32]) -> Self {
+        let mut m = TreeMemory {
+            processes: pids.len(),
+            ..Self::default()
+        };
+        for &p in pids {
+            let r = rollup(p);
+            m.rss_bytes += proc_status_kb(p, "VmRSS:") * 1024;
+            m.pss_bytes += r.pss * 1024;
+            m.pss_anon_bytes += r.pss_anon * 1024;
+            m.pss_file_bytes += r.pss_file * 1024;
+            m.pss_shmem_bytes += r.pss_shmem * 1024;
+            m.uss_bytes += r.private * 1024;
+        }
+        m
+    }
+}
+
+/// Live Chromium or chromedriver processes on this machine (their pids), whichever session they
+/// belong to. Used to warn that a lone environment's PSS is being measured next to other
+/// browsers that share its code pages.
+pub fn other_browser_processes() -> Vec<u32> {
+    let me = std::process::id();
+    let mut out = Vec::new();
+    let Ok(dir) = std::fs::read_dir("/proc") else {
+        return out;
+    };
+    for e in dir.flatten() {
+        let Some(pid) = e.file_name().to_str().and_then(|s| s.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid == me {
+            continue;
+        }
+        if let Ok(exe) = std::fs::read_link(format!("/proc/{pid}/exe")) {
+            let name = exe
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            if name.starts_with("chrom") || name == "headless_shell" {
+                out.push(pid);
+            }
+        }
+    }
+    out
 }
 
 /// A visible element as the browser reports it.
@@ -508,7 +758,7 @@ impl ChromiumBackend {
         let caps = json!({
             "capabilities": {
                 "alwaysMatch": {
-                    "browserName": "chrome",
+                    "browserName": browser_name(chromium),
                     // "none": chromedriver then skips its pending-navigation checks around
                     // every script call (a few ms per step); `load_html` waits for the page itself.
                     "pageLoadStrategy": "none",
@@ -667,15 +917,13 @@ impl ChromiumBackend {
             .collect())
     }
 
-    /// Process ids of chromedriver and the browsers it started.
+    /// Process ids of chromedriver and every live process of its browser: chromedriver's
+    /// descendants plus any process carrying this session's profile directory (a browser whose
+    /// chromedriver died) and its descendants.
     pub fn pids(&self) -> Vec<u32> {
-        let mut out: Vec<u32> = self.driver.as_ref().map(Child::id).into_iter().collect();
-        for p in processes_with(&self.profile_tag) {
-            if !out.contains(&p) {
-                out.push(p);
-            }
-        }
-        out
+        let mut roots: Vec<u32> = self.driver.as_ref().map(Child::id).into_iter().collect();
+        roots.extend(processes_with(&self.profile_tag));
+        with_descendants(&roots)
     }
 
     /// The unique string in every browser process's command line (its profile directory).
@@ -683,21 +931,36 @@ impl ChromiumBackend {
         &self.profile_tag
     }
 
-    /// Memory of chromedriver plus every Chromium process of this session.
+    /// Memory of chromedriver plus every Chromium process of this session (see [`TreeMemory`]
+    /// for what the figures mean).
     pub fn memory(&self) -> TreeMemory {
-        let pids = self.pids();
-        TreeMemory {
-            processes: pids.len(),
-            rss_bytes: pids
-                .iter()
-                .map(|&p| proc_status_kb(p, "VmRSS:") * 1024)
-                .sum(),
-            pss_bytes: pids.iter().map(|&p| smaps_kb(p, &["Pss:"]) * 1024).sum(),
-            uss_bytes: pids
-                .iter()
-                .map(|&p| smaps_kb(p, &["Private_Clean:", "Private_Dirty:"]) * 1024)
-                .sum(),
-        }
+        TreeMemory::of(&self.pids())
+    }
+
+    /// [`memory`](Self::memory) split by process: pid, role (`chromedriver`, `browser` or
+    /// Chromium's `--type=` such as `renderer`, `gpu-process`, `utility`) and its memory.
+    pub fn memory_by_process(&self) -> Vec<(u32, String, TreeMemory)> {
+        let driver = self.driver.as_ref().map(Child::id);
+        self.pids()
+            .into_iter()
+            .map(|p| {
+                let role = if Some(p) == driver {
+                    "chromedriver".to_string()
+                } else {
+                    // Chromium rewrites its children's argv into one space-separated string.
+                    std::fs::read(format!("/proc/{p}/cmdline"))
+                        .ok()
+                        .and_then(|c| {
+                            let c = String::from_utf8_lossy(&c).into_owned();
+                            c.split(['\0', ' '])
+                                .find_map(|a| a.strip_prefix("--type="))
+                                .map(String::from)
+                        })
+                        .unwrap_or_else(|| "browser".into())
+                };
+                (p, role, TreeMemory::of(&[p]))
+            })
+            .collect()
     }
 
     /// Ends the session, stops chromedriver and kills any remaining process of this browser.
@@ -706,6 +969,12 @@ impl ChromiumBackend {
         if self.driver.is_none() && self.profile_dir.is_none() {
             return;
         }
+        // Remembered with start times so that a recycled pid is never killed.
+        let tree: Vec<(u32, u64)> = self
+            .pids()
+            .into_iter()
+            .filter_map(|p| proc_stat(p).map(|(_, start)| (p, start)))
+            .collect();
         if !self.session.is_empty() {
             self.conn.timeout = Duration::from_secs(10);
             let path = format!("/session/{}", self.session);
@@ -718,10 +987,15 @@ impl ChromiumBackend {
             let _ = d.wait();
         }
         // Chromium processes left behind (e.g. after chromedriver died) carry our unique profile
-        // path; end exactly those, by pid.
+        // path or were in the tree; end exactly those, by pid.
         let deadline = Instant::now() + Duration::from_secs(5);
         loop {
-            let left = processes_with(&self.profile_tag);
+            let mut left = processes_with(&self.profile_tag);
+            for &(p, start) in &tree {
+                if proc_stat(p).is_some_and(|(_, s)| s == start) && !left.contains(&p) {
+                    left.push(p);
+                }
+            }
             if left.is_empty() || Instant::now() > deadline {
                 break;
             }

@@ -13,6 +13,8 @@
 //! - [`DomState`]: the dynamic DOM, the simulated backend's action semantics and its layout;
 //! - [`ChromiumBackend`]: headless Chromium through chromedriver (W3C WebDriver over a hand-written
 //!   HTTP/1.1 client), pages served from an in-process 127.0.0.1 server, one round trip per step;
+//!   Debian's `chromium-headless-shell` when installed (a lone environment under 200 MiB, see
+//!   [`TreeMemory`] for how that is measured), else the full `chromium`;
 //! - [`WebNavEnv`]: the environment, registered as `WebNavigation-Difficulty-0{1,2,3}-v0`.
 //!
 //! ## Observation and action contract
@@ -81,6 +83,7 @@ use a2perf_core::{EnvEntry, EnvError, ParamKind, ParamSpec, Params, Registry, Ta
 
 pub use chromium::{
     ChromiumBackend, ChromiumOptions, SnapshotElement, TreeMemory, chromium_available,
+    other_browser_processes,
 };
 pub use design::{Design, level_of_probability, load_designs, page_difficulty, parse_designs};
 pub use dom::{ActionKind, DomState, Event};

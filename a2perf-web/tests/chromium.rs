@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 
 use a2perf_core::{Action, Env, Observation, RngStream, Step};
 use a2perf_web::{
-    BackendKind, ChromiumBackend, ChromiumOptions, Design, Limits, Vocabulary, WebNavConfig,
-    WebNavEnv, Website, chromium_available, generate,
+    BackendKind, ChromiumBackend, ChromiumOptions, Design, Limits, TreeMemory, Vocabulary,
+    WebNavConfig, WebNavEnv, Website, chromium_available, generate,
 };
 
 /// Geometry tolerance of the parity test, in normalised units (≈ 0.4 px on a 375 px page).
@@ -319,4 +319,72 @@ fn rendered_website_screenshot_shows_the_form() {
         snap.iter().filter(|e| e.tag.starts_with("input_")).count() >= site.fields.len().min(1)
     );
     chrome.shutdown();
+}
+
+/// Parent pid of a live process.
+fn parent(pid: u32) -> Option<u32> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    s.rsplit(')')
+        .next()?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
+}
+
+#[test]
+fn memory_counts_the_whole_process_tree_in_the_normal_process_model() {
+    if !chrome_or_skip() {
+        return;
+    }
+    // Chromium's normal model: zygote, renderer, GPU and utility processes, some of which do not
+    // carry the profile directory on their command line.
+    let mut opts = ChromiumOptions::from_env();
+    opts.extra_args.clear();
+    let mut chrome = ChromiumBackend::launch(&opts).unwrap();
+    let design = generate(1, 4, 1, &Limits::default()).remove(0).design;
+    let site = Website::build(
+        &design,
+        &mut RngStream::new(4, "tree"),
+        Vocabulary::standard(),
+    );
+    chrome.load_html(site.to_html(false)).unwrap();
+    let pids = chrome.pids();
+    assert!(
+        pids.len() >= 3,
+        "expected a multi-process tree, got {pids:?}"
+    );
+    // Closed under "child of": every live child of a counted process is counted.
+    let all: Vec<u32> = std::fs::read_dir("/proc")
+        .unwrap()
+        .flatten()
+        .filter_map(|e| e.file_name().to_str().and_then(|s| s.parse::<u32>().ok()))
+        .filter(|&p| alive(p))
+        .collect();
+    let children: Vec<(u32, u32)> = all
+        .into_iter()
+        .filter_map(|p| parent(p).map(|pp| (p, pp)))
+        .filter(|(_, pp)| pids.contains(pp))
+        .collect();
+    // A later snapshot, so that a process started while scanning is not a false alarm.
+    let later = chrome.pids();
+    for (p, pp) in children {
+        assert!(
+            later.contains(&p) || !alive(p),
+            "child {p} of {pp} not counted in {later:?}"
+        );
+    }
+    // Chromium starts and ends helper processes at any time: measure the listed ones.
+    let m = TreeMemory::of(&pids);
+    assert_eq!(m.processes, pids.len());
+    assert!(m.uss_bytes > 0 && m.uss_bytes <= m.pss_bytes && m.pss_bytes <= m.rss_bytes);
+    assert!(m.pss_anon_bytes + m.pss_file_bytes + m.pss_shmem_bytes <= m.pss_bytes + 1024 * 1024);
+    let by_process = chrome.memory_by_process();
+    assert!(by_process.iter().any(|(_, role, _)| role == "chromedriver"));
+    assert!(by_process.iter().any(|(_, role, _)| role == "renderer"));
+    let tag = chrome.profile_tag().to_string();
+    chrome.shutdown();
+    let still: Vec<u32> = pids.iter().copied().filter(|&p| alive(p)).collect();
+    assert!(still.is_empty(), "alive after shutdown: {still:?}");
+    assert!(live_with(&tag).is_empty());
 }
