@@ -1,4 +1,5 @@
-//! Full cost, incremental move and one environment episode on an Ariane-scale netlist.
+//! Full cost, standard-cell placer, incremental move and one environment episode on an
+//! Ariane-scale netlist.
 //!
 //! Uses Ariane133/NanGate45 from `../shared/data/circuit` when present, otherwise the generated
 //! Ariane-scale circuit (133 hard macros).
@@ -53,6 +54,18 @@ fn benches(c: &mut Criterion) {
     cost.apply_placement(&case.placement).unwrap();
     let mut g = c.benchmark_group(format!("circuit/{}", case.name));
     g.sample_size(20);
+    {
+        use a2perf_circuit::placer::{FdSchedule, FdScratch, place_std_cells};
+        let (schedule, mut scratch, mut placed) =
+            (FdSchedule::default(), FdScratch::default(), cost.clone());
+        g.bench_function("fd_placer", |b| {
+            b.iter(|| {
+                placed.clone_from(&cost);
+                place_std_cells(&mut placed, &schedule, &mut scratch);
+                black_box(placed.costs().proxy_cost)
+            })
+        });
+    }
     g.bench_function("full_cost", |b| {
         b.iter(|| {
             cost.recompute();

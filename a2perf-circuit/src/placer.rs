@@ -15,6 +15,15 @@
 //!
 //! Initial positions (`use_current_loc = False` in CT): every movable node at the canvas centre,
 //! offset on a tiny golden-angle spiral so that repulsion has a direction (ours).
+//!
+//! Implementation (same forces, summed in a different order than a per-net loop would): springs
+//! are linear, so all springs of an object to fixed pins fold into one term `h − g·p`, and
+//! parallel springs between the same two objects merge into one; each object then gathers its
+//! attraction from its partners without scattered writes. Overlapping pairs are collected without
+//! data-dependent branches before their forces are computed. The schedule is sensitive to
+//! rounding (overlap tests and cancelled moves are discontinuous), so such reorderings change the
+//! final placement's proxy cost by tenths of a percent; the result is still bit-identical from
+//! run to run.
 
 use crate::cost::PlacementCost;
 use crate::netlist::NodeKind;
@@ -49,10 +58,8 @@ impl Default for FdSchedule {
 
 /// Reusable buffers of the placer (no allocation per run once warmed up).
 ///
-/// Layout of the position slots: placed hard macros `[0, hard)`, movable nodes `[hard, nobj)`, then
-/// one read-only slot per fixed pin of an active net. Forces exist only for the objects plus
-/// [`SINKS`] sink slots after them, where forces on fixed pins land (and are never read), so the
-/// per-step clearing and the force writes stay within a small, cache-resident array.
+/// Layout of the object slots: placed hard macros `[0, hard)`, then movable nodes `[hard, nobj)`.
+/// Fixed pins have no slots: their springs are folded into per-object linear terms.
 #[derive(Clone, Debug, Default)]
 pub struct FdScratch {
     node: Vec<u32>,
@@ -68,30 +75,22 @@ pub struct FdScratch {
     bucket_hard: Vec<u32>,
     bucket_items: Vec<BucketItem>,
     bucket_fill: Vec<u32>,
-    // Active nets (at least one movable endpoint), flattened; driver first.
-    a_start: Vec<u32>,
-    a_obj: Vec<u32>,
-    a_fac: Vec<f64>,
-    a_w: Vec<f64>,
-    // Per-pin attraction factor of the current round, `(w · attract) · fac`.
-    a_f: Vec<f64>,
+    // Springs between two movable objects, per object (each spring listed at both ends), as
+    // compressed rows over `[hard, nobj)`: partner slot and stiffness `w · fac` (without the
+    // round's attraction factor). Gathering per object needs no scattered force writes.
+    adj_start: Vec<u32>,
+    adj_j: Vec<u32>,
+    adj_c: Vec<f64>,
+    edges: Vec<(u32, u32, u32, f64)>,
+    // All springs of an object, `g = Σ c` over its partners, and `h = Σ c · q` over its fixed
+    // partners q (hard-macro pins, ports): `force = attract · (h + Σ c_j p_j − g · p)`.
+    lin_g: Vec<f64>,
+    lin_h: Vec<[f64; 2]>,
+    // Overlapping pairs of the current step.
+    pairs: Vec<[u32; 2]>,
 }
 
 const NONE: u32 = u32::MAX;
-
-/// Number of sink slots for forces on fixed pins. Consecutive fixed pins write to different
-/// sinks, so their read-modify-writes do not form one long dependency chain through memory.
-const SINKS: u32 = 16;
-
-/// Force slot of position slot `o` (objects write to themselves, fixed pins to a sink).
-#[inline(always)]
-fn force_slot(o: u32, nobj: u32) -> usize {
-    (if o < nobj {
-        o
-    } else {
-        nobj + (o & (SINKS - 1))
-    }) as usize
-}
 
 /// One object's entry in a repulsion bucket: a copy of what the pair test needs, so a bucket's
 /// pair loop streams through contiguous memory.
@@ -152,46 +151,82 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
             s.pos.push([cw / 2.0 + r * a.cos(), ch / 2.0 + r * a.sin()]);
         }
     }
-    // Active nets. Every fixed pin (hard-macro pin, port) gets its own read-only slot after the
-    // objects, holding its position, so the attraction loop has no branches. Pins whose force
-    // could only land on fixed slots are dropped: fixed sinks of a net with a fixed driver, and
-    // sinks on the driver's own node (their force is exactly zero).
-    s.a_start.clear();
-    s.a_obj.clear();
-    s.a_fac.clear();
-    s.a_w.clear();
-    s.a_start.push(0);
+    // Springs to fixed pins (hard-macro pins, ports) are linear in the object's own position, so
+    // all of an object's fixed springs fold into one term `h - g·p` (g = Σ w·fac, h = Σ w·fac·q
+    // over its fixed partners q), evaluated once per object per step instead of once per pin.
+    // Only springs between two movable objects stay per pin: nets with a movable driver, listed
+    // driver first with their movable sinks. Sinks on the driver's own node are dropped (their
+    // force is exactly zero), and so are springs between two fixed pins.
+    s.edges.clear();
+    s.lin_g.clear();
+    s.lin_g.resize(nobj, 0.0);
+    s.lin_h.clear();
+    s.lin_h.resize(nobj, [0.0, 0.0]);
     for net in 0..cost.net_w.len() {
         let (a, b) = (
             cost.net_start[net] as usize,
             cost.net_start[net + 1] as usize,
         );
-        if !(a..b).any(|p| is_mov(cost, cost.pin_owner[p] as usize)) {
-            continue;
-        }
+        let w = cost.net_w[net];
         let driver = cost.pin_owner[a] as usize;
         let driver_mov = is_mov(cost, driver);
         let driver_port = cost.kind[driver] == NodeKind::Port;
-        for p in a..b {
+        let (qx, qy) = (cost.pin_x[a], cost.pin_y[a]);
+        for p in a + 1..b {
             let o = cost.pin_owner[p] as usize;
             let mov = is_mov(cost, o);
-            if p > a && ((!mov && !driver_mov) || (mov && o == driver)) {
-                continue;
-            }
-            if mov {
-                s.a_obj.push(s.obj_of[o]);
-            } else {
-                s.a_obj.push(s.pos.len() as u32);
-                s.pos.push([cost.pin_x[p], cost.pin_y[p]]);
-            }
             let port = driver_port || cost.kind[o] == NodeKind::Port;
-            s.a_fac.push(if port { schedule.io_factor } else { 1.0 });
+            let c = w * if port { schedule.io_factor } else { 1.0 };
+            match (driver_mov, mov) {
+                (true, true) if o != driver => {
+                    let (kd, ko) = (s.obj_of[driver], s.obj_of[o]);
+                    let seq = s.edges.len() as u32;
+                    s.edges.push((kd, ko, seq, c));
+                    s.edges.push((ko, kd, seq + 1, c));
+                    s.lin_g[kd as usize] += c;
+                    s.lin_g[ko as usize] += c;
+                }
+                (true, false) => {
+                    let k = s.obj_of[driver] as usize;
+                    s.lin_g[k] += c;
+                    s.lin_h[k][0] += c * cost.pin_x[p];
+                    s.lin_h[k][1] += c * cost.pin_y[p];
+                }
+                (false, true) => {
+                    let k = s.obj_of[o] as usize;
+                    s.lin_g[k] += c;
+                    s.lin_h[k][0] += c * qx;
+                    s.lin_h[k][1] += c * qy;
+                }
+                _ => {}
+            }
         }
-        s.a_start.push(s.a_obj.len() as u32);
-        s.a_w.push(cost.net_w[net]);
+    }
+    // Rows by object; parallel springs between the same two objects (clusters share many nets)
+    // merge into one, summed in net order. The keys are unique, so the order is deterministic.
+    s.edges.sort_unstable_by_key(|&(k, j, seq, _)| (k, j, seq));
+    s.adj_start.clear();
+    s.adj_start.resize(nobj - hard + 1, 0);
+    s.adj_j.clear();
+    s.adj_c.clear();
+    let mut last = (NONE, NONE);
+    for &(k, j, _, c) in &s.edges {
+        if (k, j) == last {
+            if let Some(sum) = s.adj_c.last_mut() {
+                *sum += c;
+            }
+        } else {
+            last = (k, j);
+            s.adj_j.push(j);
+            s.adj_c.push(c);
+            s.adj_start[k as usize - hard + 1] += 1;
+        }
+    }
+    for k in 0..nobj - hard {
+        s.adj_start[k + 1] += s.adj_start[k];
     }
     s.force.clear();
-    s.force.resize(nobj + SINKS as usize, [0.0, 0.0]);
+    s.force.resize(nobj, [0.0, 0.0]);
     let max_soft = (hard..nobj)
         .map(|k| s.half[k][0].max(s.half[k][1]) * 2.0)
         .fold(0.0f64, f64::max);
@@ -204,12 +239,6 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
     for round in 0..rounds {
         let max_move = schedule.move_distance_factors[round] * cw.max(ch) / 100.0;
         let attract = schedule.attract[round];
-        s.a_f.clear();
-        for net in 0..s.a_w.len() {
-            let w = s.a_w[net] * attract;
-            let (a, b) = (s.a_start[net] as usize, s.a_start[net + 1] as usize);
-            s.a_f.extend(s.a_fac[a..b].iter().map(|&fac| w * fac));
-        }
         for _ in 0..schedule.num_steps[round] {
             step(
                 s,
@@ -241,29 +270,38 @@ fn step(
     hard: usize,
 ) {
     let nobj = s.node.len();
-    let nobj32 = nobj as u32;
-    s.force.iter_mut().for_each(|f| *f = [0.0, 0.0]);
+    s.force[..hard].iter_mut().for_each(|f| *f = [0.0, 0.0]);
     if attract != 0.0 {
-        let (pos, force) = (&s.pos[..], &mut s.force[..]);
-        let (a_obj, a_f) = (&s.a_obj[..], &s.a_f[..]);
-        for w in s.a_start.windows(2) {
+        let pos = &s.pos[..];
+        for (((f, &[px, py]), (&g, &[hx, hy])), w) in s.force[hard..nobj]
+            .iter_mut()
+            .zip(&pos[hard..nobj])
+            .zip(s.lin_g[hard..nobj].iter().zip(&s.lin_h[hard..nobj]))
+            .zip(s.adj_start.windows(2))
+        {
             let (a, b) = (w[0] as usize, w[1] as usize);
-            let d = a_obj[a];
-            let [dxp, dyp] = pos[d as usize];
-            let (mut fdx, mut fdy) = (0.0, 0.0);
-            for (&o, &f) in a_obj[a + 1..b].iter().zip(&a_f[a + 1..b]) {
-                let [ox, oy] = pos[o as usize];
-                let (fx, fy) = (f * (ox - dxp), f * (oy - dyp));
-                fdx += fx;
-                fdy += fy;
-                let t = &mut force[force_slot(o, nobj32)];
-                t[0] -= fx;
-                t[1] -= fy;
+            // Two independent accumulators halve the add-latency chain.
+            let (mut s0, mut s1) = ([hx, hy], [0.0, 0.0]);
+            let (js, cs) = (&s.adj_j[a..b], &s.adj_c[a..b]);
+            let mut pairs_j = js.chunks_exact(2);
+            let mut pairs_c = cs.chunks_exact(2);
+            for (j, c) in (&mut pairs_j).zip(&mut pairs_c) {
+                let [x0, y0] = pos[j[0] as usize];
+                let [x1, y1] = pos[j[1] as usize];
+                s0 = [s0[0] + c[0] * x0, s0[1] + c[0] * y0];
+                s1 = [s1[0] + c[1] * x1, s1[1] + c[1] * y1];
             }
-            let t = &mut force[force_slot(d, nobj32)];
-            t[0] += fdx;
-            t[1] += fdy;
+            for (&j, &c) in pairs_j.remainder().iter().zip(pairs_c.remainder()) {
+                let [x, y] = pos[j as usize];
+                s0 = [s0[0] + c * x, s0[1] + c * y];
+            }
+            *f = [
+                attract * ((s0[0] + s1[0]) - g * px),
+                attract * ((s0[1] + s1[1]) - g * py),
+            ];
         }
+    } else {
+        s.force.iter_mut().for_each(|f| *f = [0.0, 0.0]);
     }
     if repel != 0.0 {
         repulsion(s, (cw, ch), repel * max_move, max_soft, hard);
@@ -300,12 +338,8 @@ fn repulsion(s: &mut FdScratch, (cw, ch): (f64, f64), mag: f64, max_soft: f64, h
     let br = ((ch / cell).ceil() as usize).clamp(1, 256);
     let (ibw, ibh) = (bc as f64 / cw, br as f64 / ch);
     let bucket = |v: f64, inv: f64, n: usize| -> usize {
-        let b = v * inv;
-        if b.is_nan() || b < 0.0 {
-            0
-        } else {
-            (b as usize).min(n - 1)
-        }
+        // `as` maps NaN and negatives to 0.
+        ((v * inv) as usize).min(n - 1)
     };
     let nb = bc * br;
     let nobj = s.node.len();
@@ -315,10 +349,16 @@ fn repulsion(s: &mut FdScratch, (cw, ch): (f64, f64), mag: f64, max_soft: f64, h
     for (p, h) in s.pos[..nobj].iter().zip(&s.half[..nobj]) {
         let b = [p[0] - h[0], p[1] - h[1], p[0] + h[0], p[1] + h[1]];
         s.bbox.push(b);
-        s.ll_bucket
-            .push([bucket(b[0], ibw, bc) as u32, bucket(b[1], ibh, br) as u32]);
-        s.ur_bucket
-            .push([bucket(b[2], ibw, bc) as u32, bucket(b[3], ibh, br) as u32]);
+        if b[0] < b[2] && b[1] < b[3] {
+            s.ll_bucket
+                .push([bucket(b[0], ibw, bc) as u32, bucket(b[1], ibh, br) as u32]);
+            s.ur_bucket
+                .push([bucket(b[2], ibw, bc) as u32, bucket(b[3], ibh, br) as u32]);
+        } else {
+            // No area, no overlap: an empty bucket range keeps it out of every bucket.
+            s.ll_bucket.push([1, 1]);
+            s.ur_bucket.push([0, 0]);
+        }
     }
     s.bucket_start.clear();
     s.bucket_start.resize(nb + 1, 0);
@@ -361,8 +401,9 @@ fn repulsion(s: &mut FdScratch, (cw, ch): (f64, f64), mag: f64, max_soft: f64, h
             }
         }
     }
-    let pos = &s.pos[..];
-    let force = &mut s.force[..];
+    // Pass 1 collects the overlapping pairs without data-dependent branches (the overlap test is
+    // unpredictable); pass 2 computes their forces, independent of one another.
+    let mut n = 0;
     for b in 0..nb {
         let (lo, hi) = (s.bucket_start[b] as usize, s.bucket_start[b + 1] as usize);
         // Hard macros come first in a bucket and never repel each other.
@@ -371,42 +412,48 @@ fn repulsion(s: &mut FdScratch, (cw, ch): (f64, f64), mag: f64, max_soft: f64, h
         let items = &s.bucket_items[..];
         for ia in lo..hi {
             let BucketItem {
-                bbox: bu, ll: lu, ..
+                bbox: bu,
+                ll: lu,
+                k: u,
             } = items[ia];
-            let u = items[ia].k as usize;
-            for it in &items[(ia + 1).max(first_mov)..hi] {
-                // The pair belongs to the bucket of its intersection's lower-left corner, whose
-                // bucket is the max of the two lower-left buckets (bucketing is monotone).
-                let lv = it.ll;
-                if lu[0].max(lv[0]) != bcol || lu[1].max(lv[1]) != brow {
-                    continue;
-                }
-                let (bv, v) = (it.bbox, it.k as usize);
-                let ix = bu[0].max(bv[0]);
-                let iy = bu[1].max(bv[1]);
-                let ix1 = bu[2].min(bv[2]);
-                let iy1 = bu[3].min(bv[3]);
-                if ix >= ix1 || iy >= iy1 {
-                    continue;
-                }
-                let (mut ddx, mut ddy) = (pos[u][0] - pos[v][0], pos[u][1] - pos[v][1]);
-                let d = (ddx * ddx + ddy * ddy).sqrt();
-                if d == 0.0 {
-                    ddx = -std::f64::consts::FRAC_1_SQRT_2;
-                    ddy = -std::f64::consts::FRAC_1_SQRT_2;
-                } else {
-                    ddx /= d;
-                    ddy /= d;
-                }
-                if u >= hard {
-                    force[u][0] += mag * ddx;
-                    force[u][1] += mag * ddy;
-                }
-                if v >= hard {
-                    force[v][0] -= mag * ddx;
-                    force[v][1] -= mag * ddy;
-                }
+            let cand = &items[(ia + 1).max(first_mov)..hi];
+            if s.pairs.len() < n + cand.len() {
+                s.pairs.resize(n + cand.len(), [0, 0]);
+            }
+            for it in cand {
+                let (bv, lv) = (it.bbox, it.ll);
+                // Plain comparisons instead of max/min: objects without area never reach a
+                // bucket, so this is the test "intersection non-empty". The pair belongs to the
+                // bucket of its intersection's lower-left corner, whose bucket is the max of the
+                // two lower-left buckets (bucketing is monotone).
+                let keep = (bu[0] < bv[2])
+                    & (bv[0] < bu[2])
+                    & (bu[1] < bv[3])
+                    & (bv[1] < bu[3])
+                    & (lu[0].max(lv[0]) == bcol)
+                    & (lu[1].max(lv[1]) == brow);
+                s.pairs[n] = [u, it.k];
+                n += keep as usize;
             }
         }
+    }
+    let pos = &s.pos[..];
+    let force = &mut s.force[..];
+    for &[u, v] in &s.pairs[..n] {
+        let (u, v) = (u as usize, v as usize);
+        let (ddx, ddy) = (pos[u][0] - pos[v][0], pos[u][1] - pos[v][1]);
+        let d = (ddx * ddx + ddy * ddy).sqrt();
+        let r = mag / d;
+        let (fx, fy) = if d == 0.0 {
+            let c = -std::f64::consts::FRAC_1_SQRT_2 * mag;
+            (c, c)
+        } else {
+            (ddx * r, ddy * r)
+        };
+        // Hard macros' force slots absorb their share unread (cleared each step), so no branch.
+        force[u][0] += fx;
+        force[u][1] += fy;
+        force[v][0] -= fx;
+        force[v][1] -= fy;
     }
 }

@@ -257,7 +257,11 @@ fn fd_placer_is_deterministic_and_stays_inside() {
     let mut b = cost0.clone();
     let sched = FdSchedule::default();
     place_std_cells(&mut a, &sched, &mut FdScratch::default());
-    place_std_cells(&mut b, &sched, &mut FdScratch::default());
+    // A scratch warmed on another circuit must leave no trace in the result.
+    let mut warm = FdScratch::default();
+    let (_, mut other) = small_cost(6);
+    place_std_cells(&mut other, &sched, &mut warm);
+    place_std_cells(&mut b, &sched, &mut warm);
     let (w, h) = (a.settings().canvas_width, a.settings().canvas_height);
     let mut moved = 0;
     for i in 0..netlist.nodes.len() {
