@@ -187,6 +187,18 @@ impl ObsBatch {
         &self.data[i][..self.len * self.dims[i]]
     }
 
+    /// Row `row` of tensor `i`.
+    pub fn tensor_row(&self, i: usize, row: usize) -> &[f32] {
+        let d = self.dims[i];
+        &self.data[i][row * d..(row + 1) * d]
+    }
+
+    /// Legal-action mask of row `row`, mutable (`None` for continuous action spaces).
+    pub fn mask_mut(&mut self, row: usize) -> Option<&mut [bool]> {
+        let w = self.mask_width;
+        (w > 0).then(|| &mut self.mask[row * w..(row + 1) * w])
+    }
+
     /// Row `row` of tensor `i`, mutable (for normalisation in place).
     pub fn row_mut(&mut self, i: usize, row: usize) -> &mut [f32] {
         let d = self.dims[i];

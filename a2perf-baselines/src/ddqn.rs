@@ -77,7 +77,7 @@ impl Ddqn {
                 "replay_capacity",
                 ParamKind::Int,
                 Value::Int(100_000),
-                "replay buffer capacity in transitions (paper: 1e7 with Reverb; memory is capacity × 2 × observation size floats)",
+                "replay buffer capacity in transitions (paper: 1e7 with Reverb; each observation is stored once, in its narrowest exact type, see `replay`)",
             ),
             ParamSpec::new("gamma", ParamKind::Float, Value::Float(0.99), "discount"),
             ParamSpec::new(
@@ -240,7 +240,8 @@ impl Algorithm for Ddqn {
                     Action::Discrete(a) => a,
                     Action::Continuous(_) => 0,
                 };
-                replay.push_rows(
+                replay.push(
+                    i,
                     &cur,
                     i,
                     next,

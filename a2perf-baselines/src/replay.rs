@@ -1,17 +1,300 @@
-//! A fixed-capacity ring buffer of transitions for off-policy algorithms.
+//! A fixed-capacity ring buffer of transitions for off-policy algorithms, storing observations
+//! compactly and exactly.
+//!
+//! Two things keep web-navigation replay small without changing a single sampled value:
+//!
+//! - **Each observation is stored once.** Within an episode the next observation of step `t` is
+//!   the observation of step `t + 1`; a transition refers to observation *slots* by index, and a
+//!   stream's (environment's) new observation reuses the previous transition's next slot when the
+//!   two are equal (checked, not assumed). Slots are reference-counted and recycled.
+//! - **Each tensor is stored in the narrowest exact type.** A tensor column starts as `u8` and is
+//!   widened (`u8 → u16 → f32`) the first time a value does not fit, so token ids cost one or two
+//!   bytes instead of four, float features stay `f32`, and the action mask costs one bit per action.
+//!   A value is narrowed only if it converts back to the identical `f32` bit pattern.
+//!
+//! The buffer knows nothing about domains: it sees only the observation layout's tensors.
 
 use a2perf_core::{Observation, PolicyError, RngStream};
 
 use crate::batch::{ObsBatch, ObsLayout};
 
+/// One tensor of every slot, `[slots, dim]`, in the narrowest type that holds it exactly.
+#[derive(Clone, Debug)]
+enum Column {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+    F32(Vec<f32>),
+}
+
+/// Narrowest exact encoding of one value: 0 = u8, 1 = u16, 2 = f32.
+fn width_of(v: f32) -> u8 {
+    if v.to_bits() == f32::from(v as u8).to_bits() {
+        0
+    } else if v.to_bits() == f32::from(v as u16).to_bits() {
+        1
+    } else {
+        2
+    }
+}
+
+impl Column {
+    fn width(&self) -> u8 {
+        match self {
+            Column::U8(_) => 0,
+            Column::U16(_) => 1,
+            Column::F32(_) => 2,
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            Column::U8(v) => v.len(),
+            Column::U16(v) => v.len(),
+            Column::F32(v) => v.len(),
+        }
+    }
+
+    /// Re-encodes every stored value at width `w` (exact: widening only).
+    fn widen(&mut self, w: u8) {
+        if w <= self.width() {
+            return;
+        }
+        let old: Vec<f32> = match self {
+            Column::U8(v) => v.iter().map(|x| f32::from(*x)).collect(),
+            Column::U16(v) => v.iter().map(|x| f32::from(*x)).collect(),
+            Column::F32(v) => std::mem::take(v),
+        };
+        *self = if w == 1 {
+            Column::U16(old.iter().map(|x| *x as u16).collect())
+        } else {
+            Column::F32(old)
+        };
+    }
+
+    /// Grows storage to `n` values (zero-filled), reserving in steps of a quarter of the current
+    /// size so that amortised growth wastes at most ~25% (not the 100% of `Vec` doubling).
+    fn grow_to(&mut self, n: usize) {
+        fn grow<T: Clone + Default>(v: &mut Vec<T>, n: usize) {
+            if n > v.capacity() {
+                v.reserve_exact((n - v.len()).max(v.len() / 4));
+            }
+            v.resize(n, T::default());
+        }
+        if n <= self.len() {
+            return;
+        }
+        match self {
+            Column::U8(v) => grow(v, n),
+            Column::U16(v) => grow(v, n),
+            Column::F32(v) => grow(v, n),
+        }
+    }
+
+    fn write(&mut self, at: usize, src: &[f32]) {
+        let w = src.iter().map(|v| width_of(*v)).max().unwrap_or(0);
+        self.widen(w);
+        match self {
+            Column::U8(v) => v[at..at + src.len()]
+                .iter_mut()
+                .zip(src)
+                .for_each(|(d, s)| *d = *s as u8),
+            Column::U16(v) => v[at..at + src.len()]
+                .iter_mut()
+                .zip(src)
+                .for_each(|(d, s)| *d = *s as u16),
+            Column::F32(v) => v[at..at + src.len()].copy_from_slice(src),
+        }
+    }
+
+    fn read(&self, at: usize, dst: &mut [f32]) {
+        let n = dst.len();
+        match self {
+            Column::U8(v) => dst
+                .iter_mut()
+                .zip(&v[at..at + n])
+                .for_each(|(d, s)| *d = f32::from(*s)),
+            Column::U16(v) => dst
+                .iter_mut()
+                .zip(&v[at..at + n])
+                .for_each(|(d, s)| *d = f32::from(*s)),
+            Column::F32(v) => dst.copy_from_slice(&v[at..at + n]),
+        }
+    }
+
+    /// Whether the stored values equal `src` bit for bit.
+    fn equals(&self, at: usize, src: &[f32]) -> bool {
+        let n = src.len();
+        match self {
+            Column::U8(v) => v[at..at + n]
+                .iter()
+                .zip(src)
+                .all(|(s, x)| f32::from(*s).to_bits() == x.to_bits()),
+            Column::U16(v) => v[at..at + n]
+                .iter()
+                .zip(src)
+                .all(|(s, x)| f32::from(*s).to_bits() == x.to_bits()),
+            Column::F32(v) => v[at..at + n]
+                .iter()
+                .zip(src)
+                .all(|(s, x)| s.to_bits() == x.to_bits()),
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        match self {
+            Column::U8(v) => v.capacity(),
+            Column::U16(v) => v.capacity() * 2,
+            Column::F32(v) => v.capacity() * 4,
+        }
+    }
+}
+
+/// Reference-counted observation slots.
+#[derive(Clone, Debug)]
+struct ObsStore {
+    dims: Vec<usize>,
+    columns: Vec<Column>,
+    /// Action masks, one bit per action, `words` u64 per slot.
+    mask: Vec<u64>,
+    words: usize,
+    refs: Vec<u32>,
+    free: Vec<usize>,
+}
+
+impl ObsStore {
+    fn new(layout: &ObsLayout) -> Self {
+        let dims: Vec<usize> = (0..layout.tensors.len()).map(|i| layout.dim(i)).collect();
+        let mask_width = layout.num_actions.unwrap_or(0);
+        Self {
+            columns: dims.iter().map(|_| Column::U8(Vec::new())).collect(),
+            dims,
+            mask: Vec::new(),
+            words: mask_width.div_ceil(64),
+            refs: Vec::new(),
+            free: Vec::new(),
+        }
+    }
+
+    /// A slot holding row `row` of `src`, with one reference.
+    fn insert(&mut self, src: &ObsBatch, row: usize) -> usize {
+        let slot = match self.free.pop() {
+            Some(s) => s,
+            None => {
+                let s = self.refs.len();
+                self.refs.push(0);
+                for (c, d) in self.columns.iter_mut().zip(&self.dims) {
+                    c.grow_to((s + 1) * d);
+                }
+                if self.mask.len() < (s + 1) * self.words {
+                    if (s + 1) * self.words > self.mask.capacity() {
+                        self.mask.reserve_exact(self.words.max(self.mask.len() / 4));
+                    }
+                    self.mask.resize((s + 1) * self.words, 0);
+                }
+                s
+            }
+        };
+        self.refs[slot] = 1;
+        for (i, (c, d)) in self.columns.iter_mut().zip(&self.dims).enumerate() {
+            c.write(slot * d, src.tensor_row(i, row));
+        }
+        if let Some(m) = src.mask(row) {
+            let bits = &mut self.mask[slot * self.words..(slot + 1) * self.words];
+            bits.fill(0);
+            for (a, legal) in m.iter().enumerate() {
+                if *legal {
+                    bits[a / 64] |= 1 << (a % 64);
+                }
+            }
+        }
+        slot
+    }
+
+    fn equals(&self, slot: usize, src: &ObsBatch, row: usize) -> bool {
+        let tensors_equal = self
+            .columns
+            .iter()
+            .zip(&self.dims)
+            .enumerate()
+            .all(|(i, (c, d))| c.equals(slot * d, src.tensor_row(i, row)));
+        tensors_equal
+            && src.mask(row).is_none_or(|m| {
+                let bits = &self.mask[slot * self.words..(slot + 1) * self.words];
+                m.iter()
+                    .enumerate()
+                    .all(|(a, legal)| (bits[a / 64] >> (a % 64)) & 1 == u64::from(*legal))
+            })
+    }
+
+    fn retain(&mut self, slot: usize) {
+        self.refs[slot] += 1;
+    }
+
+    fn release(&mut self, slot: usize) {
+        self.refs[slot] -= 1;
+        if self.refs[slot] == 0 {
+            self.free.push(slot);
+        }
+    }
+
+    /// Decodes `slot` into row `row` of `out`.
+    fn read(&self, slot: usize, out: &mut ObsBatch, row: usize) {
+        for (i, (c, d)) in self.columns.iter().zip(&self.dims).enumerate() {
+            c.read(slot * d, out.row_mut(i, row));
+        }
+        if let Some(m) = out.mask_mut(row) {
+            let bits = &self.mask[slot * self.words..(slot + 1) * self.words];
+            for (a, legal) in m.iter_mut().enumerate() {
+                *legal = (bits[a / 64] >> (a % 64)) & 1 == 1;
+            }
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        self.columns.iter().map(Column::bytes).sum::<usize>()
+            + self.mask.capacity() * 8
+            + self.refs.capacity() * 4
+            + self.free.capacity() * std::mem::size_of::<usize>()
+    }
+}
+
 /// Uniform replay of `(obs, action, reward, next_obs, terminated)`.
 ///
-/// Observations are stored as packed rows (not `Observation` values), so memory is
-/// `capacity × 2 × observation size` floats; once full, the oldest transition is overwritten.
+/// Transitions come from numbered *streams* (one per environment); see the module documentation
+/// for how observations are shared and compressed. Once full, the oldest transition is
+/// overwritten. Sampling returns exactly the values that were pushed.
+///
+/// ```
+/// use a2perf_baselines::replay::{ReplayBuffer, ReplaySample};
+/// use a2perf_baselines::{ObsBatch, ObsLayout};
+/// use a2perf_core::{Observation, RngStream, Tensor};
+/// let layout = ObsLayout { tensors: vec![("obs".into(), vec![2])], num_actions: Some(3) };
+/// let obs = |x: f32| Observation {
+///     tensors: vec![Tensor { name: "obs".into(), shape: vec![2], data: vec![x, 0.5] }],
+///     action_mask: Some(vec![true, false, true]),
+/// };
+/// let mut replay = ReplayBuffer::new(&layout, 100, 0);
+/// let mut cur = ObsBatch::new(&layout);
+/// cur.push(&obs(0.0)).unwrap();
+/// for t in 1..=3 {
+///     replay.push(0, &cur, 0, &obs(t as f32), t, &[], 1.0, false).unwrap();
+///     cur.write_row(0, &obs(t as f32)).unwrap();
+/// }
+/// // Three transitions, four distinct observations.
+/// assert_eq!((replay.len(), replay.stored_observations()), (3, 4));
+/// let mut sample = ReplaySample::new(&layout);
+/// replay.sample(8, &mut RngStream::new(0, "replay"), &mut Vec::new(), &mut sample);
+/// assert_eq!(sample.obs.mask(0), Some(&[true, false, true][..]));
+/// ```
 #[derive(Clone, Debug)]
 pub struct ReplayBuffer {
-    obs: ObsBatch,
-    next: ObsBatch,
+    store: ObsStore,
+    /// Decoding scratch for the next observation of a push.
+    next_row: ObsBatch,
+    obs_slot: Vec<usize>,
+    next_slot: Vec<usize>,
+    /// Per stream: the next-observation slot of its latest transition (holds one reference).
+    last_next: Vec<Option<usize>>,
     act_d: Vec<usize>,
     act_c: Vec<f32>,
     act_dim: usize,
@@ -58,8 +341,11 @@ impl ReplayBuffer {
     pub fn new(layout: &ObsLayout, capacity: usize, act_dim: usize) -> Self {
         let capacity = capacity.max(1);
         Self {
-            obs: ObsBatch::new(layout),
-            next: ObsBatch::new(layout),
+            store: ObsStore::new(layout),
+            next_row: ObsBatch::new(layout),
+            obs_slot: vec![0; capacity],
+            next_slot: vec![0; capacity],
+            last_next: Vec::new(),
             act_d: vec![0; capacity],
             act_c: vec![0.0; capacity * act_dim],
             act_dim,
@@ -81,10 +367,23 @@ impl ReplayBuffer {
         self.size == 0
     }
 
-    /// Adds a transition whose observations are row `row` of `obs` / `next` batches.
+    /// Distinct observations currently stored (at most `2 × len()`, about `len()` for long
+    /// episodes).
+    pub fn stored_observations(&self) -> usize {
+        self.store.refs.len() - self.store.free.len()
+    }
+
+    /// Bytes reserved for observations (tensor columns, mask bits and slot bookkeeping).
+    pub fn observation_bytes(&self) -> usize {
+        self.store.bytes()
+    }
+
+    /// Adds a transition of stream `stream` (e.g. the environment's index) whose observation is
+    /// row `row` of `obs` and whose next observation is `next`.
     #[allow(clippy::too_many_arguments)]
-    pub fn push_rows(
+    pub fn push(
         &mut self,
+        stream: usize,
         obs: &ObsBatch,
         row: usize,
         next: &Observation,
@@ -93,13 +392,31 @@ impl ReplayBuffer {
         reward: f32,
         terminated: bool,
     ) -> Result<(), PolicyError> {
+        // Validate `next` before touching the buffer, so a bad observation changes nothing.
+        self.next_row.resize(1);
+        self.next_row.write_row(0, next)?;
         let i = self.pos;
-        if self.obs.len() <= i {
-            self.obs.resize(i + 1);
-            self.next.resize(i + 1);
+        if self.size == self.capacity {
+            self.store.release(self.obs_slot[i]);
+            self.store.release(self.next_slot[i]);
         }
-        self.obs.copy_row(i, obs, row);
-        self.next.write_row(i, next)?;
+        if self.last_next.len() <= stream {
+            self.last_next.resize(stream + 1, None);
+        }
+        let obs_slot = match self.last_next[stream] {
+            Some(s) if self.store.equals(s, obs, row) => {
+                self.store.retain(s);
+                s
+            }
+            _ => self.store.insert(obs, row),
+        };
+        let next_slot = self.store.insert(&self.next_row, 0);
+        self.store.retain(next_slot);
+        if let Some(old) = self.last_next[stream].replace(next_slot) {
+            self.store.release(old);
+        }
+        self.obs_slot[i] = obs_slot;
+        self.next_slot[i] = next_slot;
         self.act_d[i] = act_d;
         self.act_c[i * self.act_dim..(i + 1) * self.act_dim].copy_from_slice(act_c);
         self.rewards[i] = reward;
@@ -119,18 +436,145 @@ impl ReplayBuffer {
     ) {
         idx.clear();
         idx.extend((0..n).map(|_| rng.index(self.size)));
-        out.obs.gather(&self.obs, idx);
-        out.next.gather(&self.next, idx);
+        out.obs.resize(n);
+        out.next.resize(n);
         out.act_d.clear();
         out.act_c.clear();
         out.rewards.clear();
         out.terminated.clear();
-        for &i in idx.iter() {
+        for (k, &i) in idx.iter().enumerate() {
+            self.store.read(self.obs_slot[i], &mut out.obs, k);
+            self.store.read(self.next_slot[i], &mut out.next, k);
             out.act_d.push(self.act_d[i]);
             out.act_c
                 .extend_from_slice(&self.act_c[i * self.act_dim..(i + 1) * self.act_dim]);
             out.rewards.push(self.rewards[i]);
             out.terminated.push(self.terminated[i]);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use a2perf_core::Tensor;
+
+    fn layout() -> ObsLayout {
+        ObsLayout {
+            tensors: vec![("ids".into(), vec![3]), ("x".into(), vec![2])],
+            num_actions: Some(70),
+        }
+    }
+
+    fn obs(t: u32) -> Observation {
+        let f = t as f32;
+        Observation {
+            tensors: vec![
+                Tensor {
+                    name: "ids".into(),
+                    shape: vec![3],
+                    // Grows past u8 and later past u16 (forces widening mid-run); -0.0 must
+                    // survive bit-exactly.
+                    data: vec![f, f * 37.0, if t == 5 { -0.0 } else { 0.0 }],
+                },
+                Tensor {
+                    name: "x".into(),
+                    shape: vec![2],
+                    data: vec![f * 0.1, if t > 20 { 1e6 + f } else { 1.0 }],
+                },
+            ],
+            action_mask: Some(
+                (0..70)
+                    .map(|a| !(a + t as usize).is_multiple_of(3))
+                    .collect(),
+            ),
+        }
+    }
+
+    /// Every sampled row equals what was pushed, bit for bit, across episode ends, wrap-around
+    /// and column widening.
+    #[test]
+    fn samples_are_exact() {
+        let l = layout();
+        let mut rb = ReplayBuffer::new(&l, 7, 1);
+        let mut cur = ObsBatch::new(&l);
+        cur.push(&obs(0)).unwrap();
+        let mut pushed: Vec<(u32, u32)> = Vec::new();
+        let mut t = 0u32;
+        for step in 1..40u32 {
+            // Episodes of 4 steps: the next observation after an end is not the stored one.
+            let next = step + if step.is_multiple_of(4) { 100 } else { 0 };
+            rb.push(
+                0,
+                &cur,
+                0,
+                &obs(next),
+                step as usize,
+                &[step as f32],
+                0.5,
+                false,
+            )
+            .unwrap();
+            pushed.push((t, next));
+            t = if step.is_multiple_of(4) {
+                step + 200
+            } else {
+                next
+            };
+            cur.write_row(0, &obs(t)).unwrap();
+        }
+        assert_eq!(rb.len(), 7);
+        assert!(rb.stored_observations() <= 2 * 7 + 1);
+        let mut sample = ReplaySample::new(&l);
+        let mut idx = Vec::new();
+        rb.sample(50, &mut RngStream::new(3, "t"), &mut idx, &mut sample);
+        let mut want = ObsBatch::new(&l);
+        want.resize(2);
+        for (k, &i) in idx.iter().enumerate() {
+            let step = rb.act_d[i] as u32;
+            let (o, n) = pushed[step as usize - 1];
+            want.write_row(0, &obs(o)).unwrap();
+            want.write_row(1, &obs(n)).unwrap();
+            for ti in 0..2 {
+                let bits = |s: &[f32]| s.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(sample.obs.tensor_row(ti, k)),
+                    bits(want.tensor_row(ti, 0))
+                );
+                assert_eq!(
+                    bits(sample.next.tensor_row(ti, k)),
+                    bits(want.tensor_row(ti, 1))
+                );
+            }
+            assert_eq!(sample.obs.mask(k), want.mask(0));
+            assert_eq!(sample.next.mask(k), want.mask(1));
+            assert_eq!(sample.act_c[k], step as f32);
+        }
+    }
+
+    #[test]
+    fn consecutive_observations_are_shared() {
+        let l = layout();
+        let mut rb = ReplayBuffer::new(&l, 100, 0);
+        let mut cur = ObsBatch::new(&l);
+        cur.push(&obs(1)).unwrap();
+        for t in 2..12 {
+            rb.push(0, &cur, 0, &obs(t), 0, &[], 0.0, false).unwrap();
+            cur.write_row(0, &obs(t)).unwrap();
+        }
+        assert_eq!(rb.stored_observations(), 11);
+    }
+
+    #[test]
+    fn a_bad_next_observation_changes_nothing() {
+        let l = layout();
+        let mut rb = ReplayBuffer::new(&l, 4, 0);
+        let mut cur = ObsBatch::new(&l);
+        cur.push(&obs(1)).unwrap();
+        let mut bad = obs(2);
+        bad.tensors[0].data.pop();
+        assert!(rb.push(0, &cur, 0, &bad, 0, &[], 0.0, false).is_err());
+        assert!(rb.is_empty());
+        assert_eq!(rb.stored_observations(), 0);
     }
 }

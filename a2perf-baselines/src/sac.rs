@@ -305,7 +305,8 @@ impl Algorithm for Sac {
                 } else {
                     &out.step.observation
                 };
-                replay.push_rows(
+                replay.push(
+                    i,
                     &cur,
                     i,
                     next,

@@ -294,8 +294,13 @@ fn ppo_and_ddqn_beat_random_placement() {
         "PPO circuit cost {cost} vs random {random}; curve {:?}",
         curve.returns()
     );
-    // The issue asks for 10% below the random mean; on this netlist the best of 100 random
-    // placements is only ~6% below it, and PPO at this budget reaches ~4.5% (see the report).
+    // The issue asks for 10% below the random mean, which this netlist does not allow under the
+    // paper's proxy weights: the best of 100 random placements is 6.0% below the mean and the
+    // best placement found by local search (hill climbing plus exhaustive single-macro sweeps,
+    // ~30,000 evaluations from 5 starts) 8.4% below it, because the density (~0.49) and
+    // congestion (~0.74) terms barely move. PPO reaches 4.0-5.5% here (seeds 1 and 2: ~4.5%):
+    // the exact figure moves with floating-point details of the standard-cell placer (three
+    // builds of a2perf-circuit gave random means 1.1646, 1.1641, 1.1623), hence the margin.
     assert!(
         cost <= 0.97 * random,
         "PPO cost {cost} vs random mean {random}"
@@ -327,6 +332,7 @@ fn ppo_and_ddqn_beat_random_placement() {
         "DDQN circuit cost {cost} vs random {random}; curve {:?}",
         curve.returns()
     );
+    // DDQN reaches 4.7-6.4% here (seeds 1 and 2: ~5%); see the PPO assertion for the ceiling.
     assert!(
         cost <= 0.97 * random,
         "DDQN cost {cost} vs random mean {random}"
@@ -413,10 +419,13 @@ fn sac_improves_the_pace_task() {
             ("init_alpha", Value::Float(0.01)),
             ("action_limit", Value::Float(0.3)),
             ("hidden_sizes", ints(&[64, 64])),
+            // A shorter horizon than the default 0.99 learns faster at this tiny budget
+            // (3.71 vs 2.82 at 12k steps; the local config's 30k steps with 0.99 reach ~12.8).
+            ("gamma", Value::Float(0.97)),
         ],
     );
     let s = TrainingSettings {
-        total_env_steps: 10_000,
+        total_env_steps: 12_000,
         eval_interval: 0,
         eval_episodes: 2,
         checkpoint_interval: 0,
@@ -428,10 +437,12 @@ fn sac_improves_the_pace_task() {
         "SAC pace return {r} vs zero-action {base}; curve {:?}",
         curve.returns()
     );
-    assert!(r > base, "SAC {r} vs untrained {base}");
+    // A clear improvement, not a rounding one: today 3.71 vs 2.77 (+34%).
+    assert!(r > 1.2 * base, "SAC {r} vs untrained {base}");
 }
 
-/// Diagnostic (ignored): spread of random placements and of the wirelength-hint greedy policy.
+/// Diagnostic (ignored): spread of random placements, the wirelength-hint greedy policy and the
+/// best placement a local search finds (the practical ceiling for the learning test).
 #[test]
 #[ignore]
 fn circuit_cost_landscape() {
@@ -463,8 +474,66 @@ fn circuit_cost_landscape() {
         }
     }
     let hint = -episode(env.as_mut(), &mut Hint, 0, ActMode::Greedy).0;
+    let mean = costs.iter().sum::<f64>() / 100.0;
+    println!("random mean {mean} min {min}; hint-greedy {hint}");
+    // The ceiling: hill climbing over the (deterministic) episode's action sequence, then one
+    // exhaustive sweep over every cell for every macro. An illegal cell is replaced by the
+    // nearest legal one (Manhattan distance on the grid).
+    let g = env.spec().metadata.get("grid").cloned().unwrap_or_default();
+    let cols: usize = g
+        .split('x')
+        .next()
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(16);
+    let n = match env.spec().action_space {
+        a2perf_core::Space::Discrete { n } => n,
+        _ => unreachable!(),
+    };
+    let mut cost_of = |acts: &mut Vec<usize>| -> f64 {
+        let mut step = Step::default();
+        env.reset_into(Some(0), &mut step.observation).unwrap();
+        for k in 0.. {
+            let mask = step.observation.action_mask.as_ref().unwrap();
+            if k == acts.len() {
+                acts.push(0);
+            }
+            let (r0, c0) = ((acts[k] / cols) as i64, (acts[k] % cols) as i64);
+            let a = (0..n)
+                .filter(|i| mask[*i])
+                .min_by_key(|i| ((i / cols) as i64 - r0).abs() + ((i % cols) as i64 - c0).abs())
+                .unwrap();
+            acts[k] = a;
+            env.step_into(&Action::Discrete(a), &mut step).unwrap();
+            if step.done() {
+                break;
+            }
+        }
+        -step.reward
+    };
+    let mut rng = a2perf_core::RngStream::new(1, "landscape");
+    let mut acts: Vec<usize> = Vec::new();
+    let mut best = cost_of(&mut acts);
+    for _ in 0..1_000 {
+        let mut cand = acts.clone();
+        let k = rng.index(cand.len());
+        cand[k] = rng.index(n);
+        let c = cost_of(&mut cand);
+        if c < best {
+            (best, acts) = (c, cand);
+        }
+    }
+    for k in 0..acts.len() {
+        for cell in 0..n {
+            let mut cand = acts.clone();
+            cand[k] = cell;
+            let c = cost_of(&mut cand);
+            if c < best {
+                (best, acts) = (c, cand);
+            }
+        }
+    }
     println!(
-        "random mean {} min {min}; hint-greedy {hint}",
-        costs.iter().sum::<f64>() / 100.0
+        "local search best {best} ({:.1}% below the random mean), actions {acts:?}",
+        100.0 * (1.0 - best / mean)
     );
 }

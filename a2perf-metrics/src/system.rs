@@ -60,11 +60,18 @@ fn read_err(meter: &str, reason: impl Into<String>) -> MeterError {
 }
 
 /// RSS (bytes) and accumulated CPU time (ms) of a process and all its descendants.
+///
+/// On Linux `sysinfo` also lists every thread as an entry whose parent is its process, with the
+/// process's RSS and its own CPU time; those are skipped, as the process entry already covers its
+/// threads (counting them multiplied the RSS by the number of threads).
 fn process_tree(sys: &System, root: Pid) -> (u64, u64) {
     let procs = sys.processes();
     let mut rss = 0;
     let mut cpu = 0;
     for (pid, p) in procs {
+        if p.thread_kind().is_some() {
+            continue;
+        }
         // Walk up the parent chain; bounded so a cycle in stale data cannot hang us.
         let mut cur = Some(*pid);
         let mut depth = 0;
@@ -953,6 +960,35 @@ impl Meter for InferenceTimer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn threads_are_not_counted_as_processes() {
+        let stop = Arc::new(AtomicBool::new(false));
+        let threads: Vec<_> = (0..4)
+            .map(|_| {
+                let stop = stop.clone();
+                std::thread::spawn(move || {
+                    while !stop.load(Ordering::Relaxed) {
+                        std::thread::sleep(Duration::from_millis(5));
+                    }
+                })
+            })
+            .collect();
+        let root = sysinfo::get_current_pid().unwrap();
+        let mut sys = System::new().unwrap();
+        refresh(&mut sys);
+        let own = sys.process(root).unwrap().memory();
+        let (tree, _) = process_tree(&sys, root);
+        stop.store(true, Ordering::Relaxed);
+        for t in threads {
+            t.join().unwrap();
+        }
+        // Five or more threads of one process would count its RSS five times or more.
+        assert!(
+            tree >= own && tree < own + own / 2,
+            "tree {tree} vs own {own}"
+        );
+    }
 
     #[test]
     fn iso8601_known_dates() {
