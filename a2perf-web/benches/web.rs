@@ -191,16 +191,7 @@ fn chromium(c: &mut Criterion) {
         .iter_mut()
         .map(|e| e.chromium().unwrap().memory())
         .collect();
-    let per = |f: fn(&TreeMemory) -> u64| ms.iter().map(f).sum::<u64>() / n;
-    let avg = TreeMemory {
-        processes: ms.iter().map(|m| m.processes).sum::<usize>() / n as usize,
-        rss_bytes: per(|m| m.rss_bytes),
-        pss_bytes: per(|m| m.pss_bytes),
-        pss_anon_bytes: per(|m| m.pss_anon_bytes),
-        pss_file_bytes: per(|m| m.pss_file_bytes),
-        pss_shmem_bytes: per(|m| m.pss_shmem_bytes),
-        uss_bytes: per(|m| m.uss_bytes),
-    };
+    let avg = TreeMemory::mean(&ms);
     print_memory(
         &format!("RAM per environment, {n} side by side, 300 steps each"),
         &avg,

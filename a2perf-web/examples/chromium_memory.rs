@@ -168,16 +168,7 @@ fn main() {
             .iter_mut()
             .map(|e| e.chromium().unwrap().memory())
             .collect();
-        let per = |f: fn(&TreeMemory) -> u64| ms.iter().map(f).sum::<u64>() / n as u64;
-        let avg = TreeMemory {
-            processes: ms.iter().map(|m| m.processes).sum::<usize>() / n,
-            rss_bytes: per(|m| m.rss_bytes),
-            pss_bytes: per(|m| m.pss_bytes),
-            pss_anon_bytes: per(|m| m.pss_anon_bytes),
-            pss_file_bytes: per(|m| m.pss_file_bytes),
-            pss_shmem_bytes: per(|m| m.pss_shmem_bytes),
-            uss_bytes: per(|m| m.uss_bytes),
-        };
+        let avg = TreeMemory::mean(&ms);
         println!(
             "{n} environments side by side: step p50 {:.2} ms, p90 {:.2} ms",
             percentile(&mut all_steps, 0.5),

@@ -473,16 +473,19 @@ fn free_port() -> Result<u16, WebError> {
         .map_err(|e| WebError::Browser(e.to_string()))
 }
 
+/// The pids listed in `/proc` (none where it is missing).
+fn all_pids() -> impl Iterator<Item = u32> {
+    std::fs::read_dir("/proc")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| e.file_name().to_str().and_then(|s| s.parse::<u32>().ok()))
+}
+
 /// Live processes whose command line contains `needle` (zombies have none).
 fn processes_with(needle: &str) -> Vec<u32> {
     let mut out = Vec::new();
-    let Ok(dir) = std::fs::read_dir("/proc") else {
-        return out;
-    };
-    for e in dir.flatten() {
-        let Some(pid) = e.file_name().to_str().and_then(|s| s.parse::<u32>().ok()) else {
-            continue;
-        };
+    for pid in all_pids() {
         if let Ok(cmd) = std::fs::read(format!("/proc/{pid}/cmdline"))
             && String::from_utf8_lossy(&cmd).contains(needle)
         {
@@ -620,6 +623,29 @@ pub struct TreeMemory {
 }
 
 impl TreeMemory {
+    /// The per-environment average of several environments' figures (integer division; the
+    /// default for an empty slice).
+    ///
+    /// ```
+    /// use a2perf_web::TreeMemory;
+    /// let a = TreeMemory { processes: 2, pss_bytes: 100, ..TreeMemory::default() };
+    /// let b = TreeMemory { processes: 2, pss_bytes: 300, ..TreeMemory::default() };
+    /// assert_eq!(TreeMemory::mean(&[a, b]).pss_bytes, 200);
+    /// ```
+    pub fn mean(all: &[TreeMemory]) -> Self {
+        let n = all.len().max(1);
+        let per = |f: fn(&TreeMemory) -> u64| all.iter().map(f).sum::<u64>() / n as u64;
+        TreeMemory {
+            processes: all.iter().map(|m| m.processes).sum::<usize>() / n,
+            rss_bytes: per(|m| m.rss_bytes),
+            pss_bytes: per(|m| m.pss_bytes),
+            pss_anon_bytes: per(|m| m.pss_anon_bytes),
+            pss_file_bytes: per(|m| m.pss_file_bytes),
+            pss_shmem_bytes: per(|m| m.pss_shmem_bytes),
+            uss_bytes: per(|m| m.uss_bytes),
+        }
+    }
+
     /// The memory of the processes `pids` (those that have exited count 0).
     pub fn of(pids: &[u32]) -> Self {
         let mut m = TreeMemory {
@@ -645,13 +671,7 @@ impl TreeMemory {
 pub fn other_browser_processes() -> Vec<u32> {
     let me = std::process::id();
     let mut out = Vec::new();
-    let Ok(dir) = std::fs::read_dir("/proc") else {
-        return out;
-    };
-    for e in dir.flatten() {
-        let Some(pid) = e.file_name().to_str().and_then(|s| s.parse::<u32>().ok()) else {
-            continue;
-        };
+    for pid in all_pids() {
         if pid == me {
             continue;
         }
