@@ -40,12 +40,20 @@ fn exercise(env: &mut WebNavEnv, n: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
     let mut t = 0;
     while steps.len() < n {
         if trace > 0 && !steps.is_empty() && steps.len() % trace == 0 && t == 0 {
-            let m = env.chromium().unwrap().memory();
+            let chrome = env.chromium().unwrap();
+            let m = chrome.memory();
+            // DevTools' figures are exact; `performance.memory` rounds to coarse buckets.
+            let heap = chrome
+                .cdp("Runtime.getHeapUsage", serde_json::json!({}))
+                .unwrap_or_default();
+            let f = |k: &str| heap[k].as_f64().unwrap_or(f64::NAN) / 1e6;
             println!(
-                "  trace: {} steps, PSS {:.1} MiB (anon {:.1})",
+                "  trace: {} steps, PSS {:.1} MiB (anon {:.1}), JS heap used {:.1} MB of {:.1} MB",
                 steps.len(),
                 mib(m.pss_bytes),
-                mib(m.pss_anon_bytes)
+                mib(m.pss_anon_bytes),
+                f("usedSize"),
+                f("totalSize")
             );
         }
         let a = if t % 4 == 3 {
@@ -147,6 +155,13 @@ fn main() {
         for (pid, role, m) in env.chromium().unwrap().memory_by_process() {
             print_memory(&format!("  pid {pid} {role}"), &m);
         }
+    }
+    if let Ok(heap) = env
+        .chromium()
+        .unwrap()
+        .cdp("Runtime.getHeapUsage", serde_json::json!({}))
+    {
+        println!("lone environment JS heap (DevTools Runtime.getHeapUsage, bytes): {heap}");
     }
     if let Ok(heap) = env
         .chromium()

@@ -1,17 +1,17 @@
 //! Real headless Chromium driven through chromedriver's W3C WebDriver JSON protocol.
 //!
 //! Everything is hand-written on `std::net`: a keep-alive HTTP/1.1 client for chromedriver and a
-//! tiny HTTP server that serves the current episode's page on 127.0.0.1. One `execute/sync` call
-//! per step runs the page's `a2p.step`, which applies the action and returns the new state.
+//! tiny HTTP server that serves the current episode's page on 127.0.0.1. One call per step
+//! (DevTools' `Runtime.callFunctionOn` through chromedriver's `goog/cdp/execute`) runs the
+//! page's `a2p.step`, which applies the action and returns the new state.
 //!
 //! The browser is Debian's `chromium-headless-shell` (the "old headless" build, no full-browser
 //! layer) when it is installed, else Debian's full `chromium`; both give identical pages, and
 //! the parity tests pass with either. The headless shell with [`LEAN_FLAGS`] keeps a lone
 //! environment under 200 MiB (about 160 MiB PSS for chromedriver + browser after the first
-//! reset, 172–177 MiB after 1,200 steps, up to 191 MiB = 200 MB in a 10,000-step run on a
-//! heavily loaded machine); the full browser touches about 235 MiB of its own code alone, so no
-//! flag brings it under 200 MB (about 330 MiB with [`LEAN_FLAGS`]' memory flags; it runs with
-//! [`FULL_BROWSER_FLAGS`]). [`TreeMemory`] defines the measurement.
+//! reset, 169–174 MiB after 1,200 to 10,000 steps); the full browser touches about 235 MiB of
+//! its own code alone, so no flag brings it under 200 MB (about 330 MiB with [`LEAN_FLAGS`]'
+//! memory flags; it runs with [`FULL_BROWSER_FLAGS`]). [`TreeMemory`] defines the measurement.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
@@ -715,6 +715,8 @@ pub struct ChromiumBackend {
     episode: u64,
     since_navigation: u64,
     step_body: String,
+    /// DevTools handle of the current document's `window` (see [`Self::call_in_page`]).
+    window: Option<String>,
 }
 
 impl ChromiumBackend {
@@ -752,6 +754,7 @@ impl ChromiumBackend {
             episode: 0,
             since_navigation: RELOAD_EVERY,
             step_body: String::with_capacity(256),
+            window: None,
         };
         if let Err(e) = me.start_session(&opts.chromium, &opts.extra_args) {
             me.shutdown();
@@ -830,28 +833,52 @@ impl ChromiumBackend {
     /// Loads `site` (fresh page) and reads its initial state into `state`.
     ///
     /// The page shell is loaded by navigation once (and again every [`RELOAD_EVERY`] episodes,
-    /// which bounds the renderer's memory); each episode then replaces the website's elements in
-    /// one script call.
+    /// which bounds the renderer's memory, followed by a memory-pressure signal that empties
+    /// V8's caches); each episode then replaces the website's elements in one script call.
     pub fn load(&mut self, site: &mut Website, state: &mut DomState) -> Result<(), WebError> {
         if self.since_navigation >= RELOAD_EVERY {
             self.load_html(shell_html("", ""))?;
             self.since_navigation = 0;
+            self.release_caches()?;
         }
         self.since_navigation += 1;
-        let args = Json::Array(vec![
-            Json::String(site.root_html(false)),
-            Json::String(site.profile_text()),
-        ]);
-        let v = self.execute(
-            "return a2pLoad(arguments[0], arguments[1]);",
-            &args.to_string(),
-        )?;
+        let args = [site.root_html(false), site.profile_text()].map(Json::String);
+        let v = match self.call_in_page("function(h,p){return this.a2pLoad(h,p);}", &args)? {
+            Some(v) => v,
+            None => self.execute(
+                "return a2pLoad(arguments[0], arguments[1]);",
+                &Json::Array(args.into()).to_string(),
+            )?,
+        };
         ingest(&v, site, state)
+    }
+
+    /// Tells the browser it is under critical memory pressure, which makes V8 run a
+    /// memory-reducing full GC and drop its caches (Blink purges its caches too).
+    ///
+    /// chromedriver wraps every script call in a fresh function whose source text embeds its
+    /// helper library and the call's JSON arguments, so each step and reset compiles a new,
+    /// unique script of several kB. An ordinary full GC (`gc()` with `--expose-gc`) frees none
+    /// of what accumulates, a memory-reducing one does (most likely V8's compilation cache of
+    /// those scripts): without it the page's JS heap grew from 6 to ≈ 20 MB over 10,000 steps
+    /// and a lone environment from 174 to ≈ 190 MiB PSS. Running this at each page reload
+    /// ([`RELOAD_EVERY`] episodes, ≈ 9 ms) kept it at ≈ 171 MiB, ≈ 169 MiB together with
+    /// [`call_in_page`](Self::call_in_page). A browser or driver without the command is left as
+    /// it is; only a dead browser is an error.
+    fn release_caches(&mut self) -> Result<(), WebError> {
+        match self.cdp(
+            "Memory.simulatePressureNotification",
+            json!({ "level": "critical" }),
+        ) {
+            Err(e @ WebError::BrowserDied(_)) => Err(e),
+            _ => Ok(()),
+        }
     }
 
     /// Serves `html` (a page with the [`crate::site::SCRIPT`] API), navigates the browser to it,
     /// waits until it is live and returns its `a2p.state()`.
     pub fn load_html(&mut self, html: String) -> Result<Json, WebError> {
+        self.window = None;
         self.episode += 1;
         let ep = self.episode;
         // The episode number tells the new document from the previous one while navigating.
@@ -865,15 +892,62 @@ impl ChromiumBackend {
             "return (window.a2pEpisode === {ep} && window.a2p && document.readyState !== 'loading') ? a2p.state() : null;"
         );
         let deadline = Instant::now() + Duration::from_secs(30);
-        loop {
+        let state = loop {
             match self.execute(&probe, "[]") {
                 Ok(Json::Null) | Err(WebError::Browser(_)) if Instant::now() < deadline => {
                     std::thread::sleep(Duration::from_millis(2));
                 }
                 Ok(Json::Null) => return Err(died("the page did not load within 30 s")),
-                other => return other,
+                other => break other?,
             }
+        };
+        self.window = match self.cdp(
+            "Runtime.evaluate",
+            json!({ "expression": "window", "objectGroup": "a2perf" }),
+        ) {
+            Ok(v) => v
+                .pointer("/result/objectId")
+                .and_then(Json::as_str)
+                .map(String::from),
+            Err(e @ WebError::BrowserDied(_)) => return Err(e),
+            Err(_) => None,
+        };
+        Ok(state)
+    }
+
+    /// Calls `function` (a constant JS function declaration, `this` = the page's `window`) with
+    /// `args` through DevTools' `Runtime.callFunctionOn`, or returns `None` when the current
+    /// document has no DevTools handle (then the caller uses [`execute`](Self::execute)).
+    ///
+    /// chromedriver's `execute/sync` wraps every call in a new function whose source embeds its
+    /// helper library and the call's JSON arguments, so each step compiled a unique script of
+    /// several kB: ≈ 1 ms per step, and ≈ 10 MiB more per lone environment over 10,000 steps
+    /// (most likely V8 keeps such scripts in its compilation cache until memory pressure). Here
+    /// the source is the same on every call and the arguments travel as values.
+    fn call_in_page(&mut self, function: &str, args: &[Json]) -> Result<Option<Json>, WebError> {
+        let Some(window) = &self.window else {
+            return Ok(None);
+        };
+        let params = json!({
+            "objectId": window,
+            "functionDeclaration": function,
+            "arguments": Json::Array(args.iter().map(|a| json!({ "value": a })).collect()),
+            "returnByValue": true,
+        });
+        let mut r = self.cdp("Runtime.callFunctionOn", params)?;
+        if let Some(ex) = r.get("exceptionDetails") {
+            let text = ex
+                .pointer("/exception/description")
+                .or_else(|| ex.get("text"))
+                .and_then(Json::as_str)
+                .unwrap_or("exception");
+            return Err(WebError::Browser(format!("page script: {text}")));
         }
+        Ok(Some(
+            r.pointer_mut("/result/value")
+                .map(Json::take)
+                .unwrap_or(Json::Null),
+        ))
     }
 
     /// Runs `script` with JSON `args` in the page (one round trip) and returns its result.
@@ -884,6 +958,18 @@ impl ChromiumBackend {
             Json::String(script.into())
         );
         self.call("POST", &path, &body)
+    }
+
+    /// Runs a Chrome DevTools Protocol command in the page's target through chromedriver
+    /// (`goog/cdp/execute`) and returns its result (for diagnostics such as
+    /// `Memory.getDOMCounters` or `Runtime.getHeapUsage`).
+    pub fn cdp(&mut self, cmd: &str, params: Json) -> Result<Json, WebError> {
+        let path = format!("/session/{}/goog/cdp/execute", self.session);
+        self.call(
+            "POST",
+            &path,
+            &json!({"cmd": cmd, "params": params}).to_string(),
+        )
     }
 
     /// Applies one action in the browser and reads the new state (one round trip).
@@ -902,6 +988,13 @@ impl ChromiumBackend {
                 Json::String(site.strings.get(v as usize).cloned().unwrap_or_default()),
             ),
         };
+        let args = [json!(k), json!(node), val];
+        if let Some(v) =
+            self.call_in_page("function(k,n,v){return this.a2p.step(k,n,v);}", &args)?
+        {
+            return ingest(&v, site, state);
+        }
+        let val = &args[2];
         self.step_body.clear();
         let _ = write!(
             self.step_body,

@@ -78,6 +78,19 @@ fn pick_action(obs: &Observation, rng: &mut RngStream) -> usize {
     }
 }
 
+/// DevTools' DOM counters of the page plus its JS heap use after a full GC (`usedSize`).
+fn page_counters(env: &mut WebNavEnv) -> serde_json::Value {
+    let chrome = env.chromium().unwrap();
+    let none = serde_json::json!({});
+    let mut c = chrome.cdp("Memory.getDOMCounters", none.clone()).unwrap();
+    chrome
+        .cdp("HeapProfiler.collectGarbage", none.clone())
+        .unwrap();
+    let heap = chrome.cdp("Runtime.getHeapUsage", none).unwrap();
+    c["usedSize"] = heap["usedSize"].clone();
+    c
+}
+
 #[test]
 fn simulated_and_chromium_backends_agree() {
     if !chrome_or_skip() {
@@ -93,7 +106,11 @@ fn simulated_and_chromium_backends_agree() {
     let episodes = 210;
     let (mut steps, mut worst, mut successes, mut distractors) = (0, 0.0f32, 0, 0);
     let t0 = Instant::now();
+    let mut start = serde_json::Value::Null;
     for ep in 0..episodes {
+        if ep == 10 {
+            start = page_counters(&mut real);
+        }
         let index = ep % pool.len();
         sim.reset_to_website(index, ep as u64, &mut so).unwrap();
         real.reset_to_website(index, ep as u64, &mut ro).unwrap();
@@ -145,6 +162,20 @@ fn simulated_and_chromium_backends_agree() {
         t0.elapsed().as_secs_f64()
     );
     assert!(successes > 50 && distractors > 10);
+    // Nothing of past episodes stays alive in the page: after 200 more episodes (two page-shell
+    // reloads) the DOM counters and the JS heap after a full GC are where they were after the
+    // first ten (the page script keeps no per-episode objects). Deltas, because the full
+    // browser's single process also counts its built-in pages.
+    let end = page_counters(&mut real);
+    let grew = |k: &str| end[k].as_f64().unwrap_or(f64::MAX) - start[k].as_f64().unwrap_or(0.0);
+    println!("page counters after 10 episodes {start}, after {episodes} {end}");
+    assert!(
+        grew("documents") <= 1.0
+            && grew("nodes") < 1_000.0
+            && grew("jsEventListeners") < 100.0
+            && grew("usedSize") < 4e6,
+        "page counters after 10 episodes {start}, after {episodes} {end}"
+    );
     real.close().unwrap();
 }
 
