@@ -119,20 +119,13 @@ fn web_net() -> Vec<(&'static str, Value)> {
     ]
 }
 
-#[test]
-fn ppo_learns_web_navigation_level_1() {
-    if skip_in_debug("ppo_learns_web_navigation_level_1") {
-        return;
-    }
+/// Trains `algo` (the web network plus `hp`) on one level-1 website and asserts ≥ 90% greedy
+/// success over 50 episodes.
+fn assert_learns_web(algo: &str, hp: &[(&'static str, Value)]) {
     let reg = registry();
-    let mut hp = web_net();
-    hp.extend([
-        ("learning_rate", Value::Float(1e-3)),
-        ("num_steps", Value::Int(64)),
-        ("minibatch_size", Value::Int(64)),
-        ("gamma", Value::Float(0.95)),
-    ]);
-    let mut alg = make(&reg, "ppo", &hp);
+    let mut all = web_net();
+    all.extend_from_slice(hp);
+    let mut alg = make(&reg, algo, &all);
     let s = TrainingSettings {
         total_env_steps: 6_000,
         eval_interval: 2_000,
@@ -142,11 +135,28 @@ fn ppo_learns_web_navigation_level_1() {
     };
     let (mut p, curve) = train_on(&reg, alg.as_mut(), WEB, &web_params(), 0, s);
     let success = web_success(&reg, p.as_mut(), 50);
-    println!("PPO web success {success}, curve {:?}", curve.returns());
+    let name = algo.to_uppercase();
+    println!("{name} web success {success}, curve {:?}", curve.returns());
     assert!(
         success >= 0.9,
-        "PPO greedy success {success}; curve {:?}",
+        "{name} greedy success {success}; curve {:?}",
         curve.returns()
+    );
+}
+
+#[test]
+fn ppo_learns_web_navigation_level_1() {
+    if skip_in_debug("ppo_learns_web_navigation_level_1") {
+        return;
+    }
+    assert_learns_web(
+        "ppo",
+        &[
+            ("learning_rate", Value::Float(1e-3)),
+            ("num_steps", Value::Int(64)),
+            ("minibatch_size", Value::Int(64)),
+            ("gamma", Value::Float(0.95)),
+        ],
     );
 }
 
@@ -155,34 +165,19 @@ fn ddqn_learns_web_navigation_level_1() {
     if skip_in_debug("ddqn_learns_web_navigation_level_1") {
         return;
     }
-    let reg = registry();
-    let mut hp = web_net();
-    hp.extend([
-        ("learning_rate", Value::Float(1e-3)),
-        ("batch_size", Value::Int(64)),
-        ("replay_capacity", Value::Int(5_000)),
-        ("learning_starts", Value::Int(500)),
-        ("updates_per_step", Value::Float(0.25)),
-        ("target_update_period", Value::Int(100)),
-        ("epsilon_greedy", Value::Float(0.1)),
-        ("epsilon_decay_fraction", Value::Float(0.3)),
-        ("gamma", Value::Float(0.95)),
-    ]);
-    let mut alg = make(&reg, "ddqn", &hp);
-    let s = TrainingSettings {
-        total_env_steps: 6_000,
-        eval_interval: 2_000,
-        eval_episodes: 10,
-        checkpoint_interval: 0,
-        num_envs: 4,
-    };
-    let (mut p, curve) = train_on(&reg, alg.as_mut(), WEB, &web_params(), 0, s);
-    let success = web_success(&reg, p.as_mut(), 50);
-    println!("DDQN web success {success}, curve {:?}", curve.returns());
-    assert!(
-        success >= 0.9,
-        "DDQN greedy success {success}; curve {:?}",
-        curve.returns()
+    assert_learns_web(
+        "ddqn",
+        &[
+            ("learning_rate", Value::Float(1e-3)),
+            ("batch_size", Value::Int(64)),
+            ("replay_capacity", Value::Int(5_000)),
+            ("learning_starts", Value::Int(500)),
+            ("updates_per_step", Value::Float(0.25)),
+            ("target_update_period", Value::Int(100)),
+            ("epsilon_greedy", Value::Float(0.1)),
+            ("epsilon_decay_fraction", Value::Float(0.3)),
+            ("gamma", Value::Float(0.95)),
+        ],
     );
 }
 

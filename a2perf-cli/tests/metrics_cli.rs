@@ -10,6 +10,17 @@ fn a2perf(args: &[&str]) -> std::process::Output {
         .expect("the a2perf binary runs")
 }
 
+/// Runs `a2perf args`, asserts success and parses its standard output as JSON.
+fn a2perf_json(args: &[&str]) -> serde_json::Value {
+    let out = a2perf(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON on stdout")
+}
+
 fn write_curves(path: &Path, runs: usize, points: usize) {
     let mut s = String::from("run,step,value\n");
     for r in 0..runs {
@@ -29,19 +40,13 @@ fn reliability_json_has_exactly_the_a2perf_keys() {
     write_curves(&curves, 4, 60);
     std::fs::write(&rollouts, "return\n1.0\n2.5\n-0.5\n3.0\n2.0\n").unwrap();
 
-    let out = a2perf(&[
+    let v = a2perf_json(&[
         "metrics",
         "reliability",
         "--curves",
         curves.to_str().unwrap(),
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let mut keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
     keys.sort_unstable();
     assert_eq!(
@@ -58,7 +63,7 @@ fn reliability_json_has_exactly_the_a2perf_keys() {
     assert!(v["dispersion_within_runs"]["std"].is_number());
     assert!(v["short_term_risk"].is_number());
 
-    let out = a2perf(&[
+    let v = a2perf_json(&[
         "metrics",
         "reliability",
         "--curves",
@@ -67,12 +72,6 @@ fn reliability_json_has_exactly_the_a2perf_keys() {
         rollouts.to_str().unwrap(),
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v.as_object().unwrap().len(), 7);
     // IQR of [-0.5, 1, 2, 2.5, 3] = 2.5 - 1 = 1.5; CVaR_0.05 = the minimum.
     assert_eq!(v["dispersion_across_rollouts"].as_f64(), Some(1.5));
@@ -84,7 +83,7 @@ fn reliability_chan2019_and_table_output() {
     let dir = tempfile::tempdir().unwrap();
     let curves = dir.path().join("curves.csv");
     write_curves(&curves, 3, 40);
-    let out = a2perf(&[
+    let v = a2perf_json(&[
         "metrics",
         "reliability",
         "--curves",
@@ -93,12 +92,6 @@ fn reliability_chan2019_and_table_output() {
         "chan2019",
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["LowerCVaROnDiffs"]["bigger_is_better"], true);
     assert_eq!(v["LowerCVaROnDiffs"]["values"].as_array().unwrap().len(), 3);
     assert_eq!(v["IqrWithinRuns"]["bigger_is_better"], false);
@@ -184,7 +177,7 @@ fn iqm_reports_point_and_interval_per_algorithm() {
         }
     }
     std::fs::write(&scores, s).unwrap();
-    let out = a2perf(&[
+    let v = a2perf_json(&[
         "metrics",
         "iqm",
         "--scores",
@@ -193,12 +186,6 @@ fn iqm_reports_point_and_interval_per_algorithm() {
         "2000",
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let ppo = &v["algorithms"]["ppo"];
     let sac = &v["algorithms"]["sac"];
     let (p, lo, hi) = (

@@ -714,7 +714,6 @@ pub struct ChromiumBackend {
     profile_tag: String,
     episode: u64,
     since_navigation: u64,
-    step_body: String,
     /// DevTools handle of the current document's `window` (see [`Self::call_in_page`]).
     window: Option<String>,
 }
@@ -753,7 +752,6 @@ impl ChromiumBackend {
             profile_tag,
             episode: 0,
             since_navigation: RELOAD_EVERY,
-            step_body: String::with_capacity(256),
             window: None,
         };
         if let Err(e) = me.start_session(&opts.chromium, &opts.extra_args) {
@@ -843,13 +841,7 @@ impl ChromiumBackend {
         }
         self.since_navigation += 1;
         let args = [site.root_html(false), site.profile_text()].map(Json::String);
-        let v = match self.call_in_page("function(h,p){return this.a2pLoad(h,p);}", &args)? {
-            Some(v) => v,
-            None => self.execute(
-                "return a2pLoad(arguments[0], arguments[1]);",
-                &Json::Array(args.into()).to_string(),
-            )?,
-        };
+        let v = self.call_in_page("function(h,p){return this.a2pLoad(h,p);}", &args)?;
         ingest(&v, site, state)
     }
 
@@ -916,17 +908,18 @@ impl ChromiumBackend {
     }
 
     /// Calls `function` (a constant JS function declaration, `this` = the page's `window`) with
-    /// `args` through DevTools' `Runtime.callFunctionOn`, or returns `None` when the current
-    /// document has no DevTools handle (then the caller uses [`execute`](Self::execute)).
+    /// `args` through DevTools' `Runtime.callFunctionOn`; when the current document has no
+    /// DevTools handle, through [`execute`](Self::execute) instead (same function, same result).
     ///
     /// chromedriver's `execute/sync` wraps every call in a new function whose source embeds its
     /// helper library and the call's JSON arguments, so each step compiled a unique script of
     /// several kB: ≈ 1 ms per step, and ≈ 10 MiB more per lone environment over 10,000 steps
     /// (most likely V8 keeps such scripts in its compilation cache until memory pressure). Here
     /// the source is the same on every call and the arguments travel as values.
-    fn call_in_page(&mut self, function: &str, args: &[Json]) -> Result<Option<Json>, WebError> {
+    fn call_in_page(&mut self, function: &str, args: &[Json]) -> Result<Json, WebError> {
         let Some(window) = &self.window else {
-            return Ok(None);
+            let script = format!("return ({function}).apply(window, arguments);");
+            return self.execute(&script, &Json::Array(args.to_vec()).to_string());
         };
         let params = json!({
             "objectId": window,
@@ -943,11 +936,9 @@ impl ChromiumBackend {
                 .unwrap_or("exception");
             return Err(WebError::Browser(format!("page script: {text}")));
         }
-        Ok(Some(
-            r.pointer_mut("/result/value")
-                .map(Json::take)
-                .unwrap_or(Json::Null),
-        ))
+        Ok(r.pointer_mut("/result/value")
+            .map(Json::take)
+            .unwrap_or(Json::Null))
     }
 
     /// Runs `script` with JSON `args` in the page (one round trip) and returns its result.
@@ -980,7 +971,6 @@ impl ChromiumBackend {
         node: usize,
         kind: ActionKind,
     ) -> Result<(), WebError> {
-        use std::fmt::Write as _;
         let (k, val) = match kind {
             ActionKind::Click => (0, Json::Null),
             ActionKind::Type(v) => (
@@ -989,22 +979,8 @@ impl ChromiumBackend {
             ),
         };
         let args = [json!(k), json!(node), val];
-        if let Some(v) =
-            self.call_in_page("function(k,n,v){return this.a2p.step(k,n,v);}", &args)?
-        {
-            return ingest(&v, site, state);
-        }
-        let val = &args[2];
-        self.step_body.clear();
-        let _ = write!(
-            self.step_body,
-            "{{\"script\":\"return a2p.step(arguments[0],arguments[1],arguments[2]);\",\"args\":[{k},{node},{val}]}}"
-        );
-        let path = format!("/session/{}/execute/sync", self.session);
-        let body = std::mem::take(&mut self.step_body);
-        let r = self.call("POST", &path, &body);
-        self.step_body = body;
-        ingest(&r?, site, state)
+        let v = self.call_in_page("function(k,n,v){return this.a2p.step(k,n,v);}", &args)?;
+        ingest(&v, site, state)
     }
 
     /// Every visible element's tag, text, placeholder and class as the browser reports them
