@@ -3,8 +3,6 @@
 //! every network family, counted by a per-thread counting global allocator once the workspaces
 //! have met the minibatches (see [`steady_state_allocations`]).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::collections::BTreeMap;
 
 use a2perf_baselines::batch::{ObsBatch, ObsLayout};
@@ -12,41 +10,11 @@ use a2perf_baselines::model::{DiscreteNet, GaussianArch, NetOptions, SquashedArc
 use a2perf_baselines::nn::dist::masked;
 use a2perf_baselines::nn::optim::Adam;
 use a2perf_baselines::nn::{MlpWs, clip_grad_norm};
+use a2perf_core::alloc_count::{CountingAllocator, count_allocations};
 use a2perf_core::{Action, Env, Registry, RngStream, Space, Step, Value};
 
-struct Counting;
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<usize> = const { Cell::new(0) };
-}
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        unsafe { System.realloc(p, l, n) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-}
 #[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// Allocations (including reallocations) made on this thread by `f`.
-fn count(mut f: impl FnMut()) -> usize {
-    COUNT.with(|c| c.set(0));
-    COUNTING.with(|c| c.set(true));
-    f();
-    COUNTING.with(|c| c.set(false));
-    COUNT.with(Cell::get)
-}
+static ALLOC: CountingAllocator = CountingAllocator;
 
 fn normals(rng: &mut RngStream, n: usize, scale: f32) -> Vec<f32> {
     (0..n).map(|_| rng.normal() as f32 * scale).collect()
@@ -61,11 +29,12 @@ fn steady_state_allocations(mut update: impl FnMut(usize)) -> usize {
     for k in 0..4 {
         update(k);
     }
-    count(|| {
+    count_allocations(|| {
         for k in [3, 1, 0, 2] {
             update(k);
         }
     })
+    .0
 }
 
 #[test]

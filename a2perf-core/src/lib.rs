@@ -12,6 +12,7 @@
 //! - [`RngStream`]: every random number, keyed by (seed, purpose).
 //! - [`config`]: RON experiment files with includes, overrides and precise errors.
 //! - [`results`]: atomic result files and resumable run directories.
+//! - [`alloc_count`]: a counting global allocator, to check that hot paths allocate nothing.
 //!
 //! ```
 //! use a2perf_core::{RngStream, Space};
@@ -25,6 +26,7 @@
 
 #![warn(missing_docs)]
 
+pub mod alloc_count;
 pub mod config;
 pub mod env;
 pub mod meter;

@@ -1,29 +1,17 @@
 //! Env steps/s (33 physics substeps each), reset time, raw physics substeps/s, and allocations
 //! per env step (counting global allocator).
 
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
+use a2perf_core::alloc_count::{CountingAllocator, count_allocations};
 use a2perf_core::{Action, Env, Observation, Step};
 use a2perf_locomotion::env::{EnvConfig, LocomotionEnv, Mode, MotionSource};
 use a2perf_locomotion::gait::Gait;
 use a2perf_locomotion::{RobotModel, SimConfig, Simulation};
 use criterion::{Criterion, criterion_group, criterion_main};
 
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-}
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 fn make_with(solver_iterations: usize, train: bool) -> LocomotionEnv {
     let mut cfg = EnvConfig::new(
@@ -54,15 +42,15 @@ fn allocations_per_step() {
         env.step_into(&action, &mut step).unwrap();
     }
     let mut steps = 0usize;
-    let before = ALLOCS.load(Ordering::Relaxed);
-    for _ in 0..50 {
-        env.step_into(&action, &mut step).unwrap();
-        steps += 1;
-        if step.done() {
-            break;
+    let (n, ()) = count_allocations(|| {
+        for _ in 0..50 {
+            env.step_into(&action, &mut step).unwrap();
+            steps += 1;
+            if step.done() {
+                break;
+            }
         }
-    }
-    let n = ALLOCS.load(Ordering::Relaxed) - before;
+    });
     println!(
         "allocations: {n} over {steps} env steps = {:.2}/env step ({:.3}/physics substep)",
         n as f64 / steps as f64,

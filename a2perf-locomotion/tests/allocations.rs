@@ -14,46 +14,18 @@
 //! These tests pin that budget, so that any allocation added to our per-step code (which would
 //! come on top of rapier's) fails them, and print the measured figures.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
+use a2perf_core::alloc_count::{CountingAllocator, count_allocations};
 use a2perf_core::{Action, Env, Observation, Step};
 use a2perf_locomotion::env::{ACTION_REPEAT, EnvConfig, LocomotionEnv, Mode, MotionSource};
 use a2perf_locomotion::gait::{self, Gait};
 use a2perf_locomotion::{RobotModel, SimConfig, Simulation};
 
-struct Counting;
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<usize> = const { Cell::new(0) };
-}
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        unsafe { System.realloc(p, l, n) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-}
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 /// Allocations (including reallocations) made on this thread by `f`.
 fn count(f: impl FnOnce()) -> usize {
-    COUNT.with(|c| c.set(0));
-    COUNTING.with(|c| c.set(true));
-    f();
-    COUNTING.with(|c| c.set(false));
-    COUNT.with(Cell::get)
+    count_allocations(f).0
 }
 
 /// rapier 0.36.1's floor per physics substep when body torques are set (see the module docs).

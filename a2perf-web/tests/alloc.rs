@@ -1,30 +1,11 @@
 //! The simulated backend's step allocates nothing (counted with a global allocator).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
+use a2perf_core::alloc_count::{CountingAllocator, count_allocations};
 use a2perf_core::{Action, Env, Observation, RngStream, Step};
 use a2perf_web::{WebNavConfig, WebNavEnv};
 
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-
 #[global_allocator]
-static A: Counting = Counting;
+static A: CountingAllocator = CountingAllocator;
 
 #[test]
 fn simulated_step_does_not_allocate() {
@@ -49,12 +30,11 @@ fn simulated_step_does_not_allocate() {
                 }
             };
             let action = Action::Discrete(a);
-            let before = ALLOCS.load(Ordering::SeqCst);
-            env.step_into(&action, &mut step).unwrap();
-            let after = ALLOCS.load(Ordering::SeqCst);
+            let (n, r) = count_allocations(|| env.step_into(&action, &mut step));
+            r.unwrap();
             // The first step of the first episode sizes the step's buffers.
             if ep > 0 || t > 0 {
-                assert_eq!(after, before, "episode {ep} step {t} allocated");
+                assert_eq!(n, 0, "episode {ep} step {t} allocated");
                 counted += 1;
             }
             steps += 1;
