@@ -3,7 +3,7 @@
 //! | observation | network | paper's network |
 //! |---|---|---|
 //! | anything (fallback) | all tensors flattened → MLP (`hidden_sizes`, ReLU) for logits or mean, a separate MLP for the value | QL actor/value `fc_layer_params=(512, 256)` |
-//! | circuit (`features`, `grid` `[C, rows, cols]`, `Discrete(rows·cols)`) | MLP over `features` → global embedding *g*; per-cell hidden layer `relu(W_c·cell + W_g·g)` → one score per cell (a 1×1 convolution conditioned on *g*); value MLP on *g* (32-8-1) | GCN encoder over the netlist graph, deconvolution head 8×8×32 → 128×128, value head 32-8-1. We have no graph tensor in the contract, so the summary features stand in for the GCN embedding; the per-cell head replaces the deconvolution because our grid is the env's own (no 128×128 padding). |
+//! | circuit (`features`, `grid` `[C, rows, cols]`, `Discrete(rows·cols)`) | MLP over `features` → global embedding *g*; per-cell hidden layer `relu(W_c·[cell channels, cell position] + W_g·g)` → one score per cell (a 1×1 convolution conditioned on *g*, plus the cell's position `x, y, |x|, |y|` in [−1, 1]); value MLP on *g* (32-8-1) | GCN encoder over the netlist graph, deconvolution head 8×8×32 → 128×128, value head 32-8-1. We have no graph tensor in the contract, so the summary features stand in for the GCN embedding; the per-cell head replaces the deconvolution because our grid is the env's own (no 128×128 padding). |
 //! | web (`profile_*`, `dom_*`, `Discrete(E·F·2)`) | token embeddings (`embedding_dim`, paper 100) mean-pooled per attribute; element MLP over the 5 pooled attributes + 8 DOM features → `latent_dim` (paper 50); field MLP over pooled key + value → `latent_dim`; logit(e, f, k) = ⟨field_f, element_e⟩ + type_k(element_e) + type_k(field_f); value MLP on the mean element and mean field embeddings | sonnet `WebLSTMEncoder`: same embedding/latent sizes and the same dot-product + action-type logits; an LSTM runs over the DOM sequence. We drop the LSTM (elements are scored independently plus their 8 geometry/state features), which keeps inference allocation-free and fast. |
 
 use a2perf_core::{EnvSpec, PolicyError, RngStream, Space};
@@ -48,6 +48,13 @@ pub struct CircuitArch {
     grid: usize,
     channels: usize,
     cells: usize,
+    /// Grid `(rows, cols)` of the current layout (for the cell-position inputs).
+    #[serde(default)]
+    shape: (usize, usize),
+    /// Cell-position inputs appended to each cell's channels ([`CELL_POSITION_INPUTS`]; 0 in
+    /// checkpoints written before they existed, which then run as before).
+    #[serde(default)]
+    position_inputs: usize,
     global: Mlp,
     global_to_cell: Linear,
     cell_in: Linear,
@@ -342,6 +349,7 @@ impl CircuitArch {
         self.features = features;
         self.grid = grid;
         self.cells = cells;
+        self.shape = (shape[1], shape[2]);
         Ok(())
     }
 }
@@ -367,7 +375,7 @@ fn circuit_arch(
     let k = opts.latent_dim;
     let global = Mlp::encoder(alloc, &sizes, Activation::Relu);
     let global_to_cell = Linear::new(alloc, h, k);
-    let cell_in = Linear::new(alloc, channels, k);
+    let cell_in = Linear::new(alloc, channels + CELL_POSITION_INPUTS, k);
     let score = Linear::new(alloc, k, 1);
     let value = with_value.then(|| Mlp::new(alloc, &[h, 32, 8, 1], Activation::Relu));
     Some(DiscreteArch::Circuit(CircuitArch {
@@ -376,6 +384,8 @@ fn circuit_arch(
         grid,
         channels,
         cells: n,
+        shape: (shape[1], shape[2]),
+        position_inputs: CELL_POSITION_INPUTS,
         global,
         global_to_cell,
         cell_in,
@@ -384,23 +394,42 @@ fn circuit_arch(
     }))
 }
 
+/// Inputs describing a cell's place on the canvas: `x`, `y` in [−1, 1] and their magnitudes
+/// (distance from the centre line, i.e. nearness to an edge). The grid channels say what is
+/// around a cell but not where it is, and where matters: real designs put macros along the
+/// edges and keep the centre for the logic (the paper's deconvolution head knows positions).
+pub const CELL_POSITION_INPUTS: usize = 4;
+
 fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws) {
     let b = batch.len();
     let (nc, ch, k) = (c.cells, c.channels, c.cell_in.out);
+    let (pi, (rows, cols)) = (c.position_inputs, c.shape);
+    let stride = ch + pi;
     let g = c
         .global
         .forward(params, batch.tensor(c.features), b, &mut ws.a);
     let [gc, cx, h, ..] = &mut ws.v;
     ensure(gc, b * k);
     c.global_to_cell.forward(params, g, b, gc);
-    ensure(cx, b * nc * ch);
+    ensure(cx, b * nc * stride);
     let grid = batch.tensor(c.grid);
     for r in 0..b {
         let src = &grid[r * ch * nc..(r + 1) * ch * nc];
-        let dst = &mut cx[r * nc * ch..(r + 1) * nc * ch];
+        let dst = &mut cx[r * nc * stride..(r + 1) * nc * stride];
         for chn in 0..ch {
             for i in 0..nc {
-                dst[i * ch + chn] = src[chn * nc + i];
+                dst[i * stride + chn] = src[chn * nc + i];
+            }
+        }
+        if pi == CELL_POSITION_INPUTS && rows * cols == nc {
+            for i in 0..nc {
+                let x = 2.0 * ((i % cols) as f32 + 0.5) / cols as f32 - 1.0;
+                let y = 2.0 * ((i / cols) as f32 + 0.5) / rows as f32 - 1.0;
+                dst[i * stride + ch..(i + 1) * stride].copy_from_slice(&[x, y, x.abs(), y.abs()]);
+            }
+        } else if pi > 0 {
+            for i in 0..nc {
+                dst[i * stride + ch..(i + 1) * stride].fill(0.0);
             }
         }
     }

@@ -50,6 +50,9 @@ pub struct PpoConfig {
     pub normalize_rewards: bool,
     /// Initial log-std of the Gaussian policy.
     pub init_log_std: f32,
+    /// Whether the log-std is trained (false: fixed at `init_log_std`, as motion_imitation's
+    /// PPO with its constant std of 0.125).
+    pub learn_log_std: bool,
     /// Networks.
     pub net: NetOptions,
 }
@@ -145,6 +148,12 @@ impl Ppo {
                 Value::Float(-0.5),
                 "initial log standard deviation of the Gaussian policy (continuous actions)",
             ),
+            ParamSpec::new(
+                "learn_log_std",
+                ParamKind::Bool,
+                Value::Bool(true),
+                "train the Gaussian's log-std (false: keep it at init_log_std, as motion_imitation's fixed std 0.125)",
+            ),
         ];
         v.extend(schedule_specs());
         v.extend(net_specs(&[64, 64]));
@@ -169,6 +178,7 @@ impl Ppo {
                 normalize_observations: p.bool("normalize_observations").map_err(hp)?,
                 normalize_rewards: p.bool("normalize_rewards").map_err(hp)?,
                 init_log_std: p.f64("init_log_std").map_err(hp)? as f32,
+                learn_log_std: p.bool("learn_log_std").map_err(hp)?,
                 net: net_options(p)?,
             },
         })
@@ -494,8 +504,10 @@ impl Algorithm for Ppo {
                                     None,
                                 );
                             }
-                            for (k, d) in dlog_std.iter().enumerate() {
-                                grads[g.log_std + k] += d;
+                            if cfg.learn_log_std {
+                                for (k, d) in dlog_std.iter().enumerate() {
+                                    grads[g.log_std + k] += d;
+                                }
                             }
                         }
                         Head::Squashed(_) => {}

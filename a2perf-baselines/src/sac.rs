@@ -13,7 +13,7 @@ use crate::model::SquashedArch;
 use crate::nn::dist::tanh_gaussian;
 use crate::nn::optim::{Adam, LrSchedule};
 use crate::nn::{Activation, Mlp, MlpWs, ParamAlloc, clip_grad_norm, ensure, polyak};
-use crate::policy::{Head, NetPolicy, squash_to_bounds};
+use crate::policy::{Head, NetPolicy, ObsNorm, squash_to_bounds};
 use crate::replay::{ReplayBuffer, ReplaySample};
 
 /// SAC hyperparameters (see [`Sac::params`]).
@@ -41,6 +41,8 @@ pub struct SacConfig {
     pub hidden: Vec<usize>,
     /// Half-range of the squashed actions around the box centre (0 = full bounds).
     pub action_limit: f32,
+    /// Normalise observations by running statistics (frozen into the policy).
+    pub normalize_observations: bool,
 }
 
 /// The SAC algorithm.
@@ -115,6 +117,12 @@ impl Sac {
                 Value::Float(0.0),
                 "squash actions into centre ± action_limit instead of the full bounds, 0 = full bounds (locomotion's ±2π pose offsets are far wider than useful)",
             ),
+            ParamSpec::new(
+                "normalize_observations",
+                ParamKind::Bool,
+                Value::Bool(false),
+                "running observation normalisation, as PPO's (the replay keeps raw observations; minibatches are normalised with the current statistics)",
+            ),
         ];
         v.extend(schedule_specs());
         v.extend(
@@ -163,6 +171,7 @@ impl Sac {
                 init_alpha: positive_f32(p, "init_alpha")?,
                 max_grad_norm: nonneg_f32(p, "max_grad_norm")?,
                 action_limit: nonneg_f32(p, "action_limit")?,
+                normalize_observations: p.bool("normalize_observations").map_err(hp)?,
                 hidden,
             },
         })
@@ -234,6 +243,9 @@ impl Algorithm for Sac {
             ctx.seed(),
         )?;
         policy.action_limit = cfg.action_limit;
+        if cfg.normalize_observations {
+            policy.obs_norm = ObsNorm::for_head(&policy.head, &layout);
+        }
         let mut actor_adam = Adam::new(policy.params.len());
         let mut actor_grads = vec![0.0f32; policy.params.len()];
         let mut log_alpha = cfg.init_alpha.ln();
@@ -247,6 +259,8 @@ impl Algorithm for Sac {
         let mut noise_rng = ctx.rng("sac/update-noise");
         let mut sample_rng = ctx.rng("sac/replay");
         let mut cur = ObsBatch::new(&layout);
+        // `cur` normalised for acting; the replay stores raw observations.
+        let mut cur_n = ObsBatch::new(&layout);
         let mut actions = vec![Action::Continuous(vec![0.0; d]); n_env];
         let mut a_norm = vec![0.0f32; n_env * d];
         let mut ws_actor = MlpWs::default();
@@ -269,12 +283,25 @@ impl Algorithm for Sac {
             cur.write_row(i, &out.step.observation)?;
         }
         loop {
+            if let Some(n) = &mut policy.obs_norm {
+                n.update(&cur, n_env);
+            }
             if (env_steps as usize) < cfg.learning_starts {
                 for v in a_norm.iter_mut() {
                     *v = rng.range(-1.0, 1.0) as f32;
                 }
             } else {
-                cur.concat_into(&mut x);
+                match &policy.obs_norm {
+                    Some(n) => {
+                        cur_n.resize(n_env);
+                        for i in 0..n_env {
+                            cur_n.copy_row(i, &cur, i);
+                            n.apply(&mut cur_n, i);
+                        }
+                        cur_n.concat_into(&mut x);
+                    }
+                    None => cur.concat_into(&mut x),
+                }
                 let out = actor.forward(&policy.params, &x, n_env, &mut ws_actor);
                 ensure(&mut eps, d);
                 for i in 0..n_env {
@@ -328,6 +355,12 @@ impl Algorithm for Sac {
                     credit -= 1.0;
                     replay.sample(cfg.batch_size, &mut sample_rng, &mut idx, &mut sample);
                     let b = sample.obs.len();
+                    if let Some(n) = &policy.obs_norm {
+                        for r in 0..b {
+                            n.apply(&mut sample.obs, r);
+                            n.apply(&mut sample.next, r);
+                        }
+                    }
                     let alpha = log_alpha.exp();
                     sample.obs.concat_into(&mut x);
                     sample.next.concat_into(&mut xn);

@@ -23,7 +23,17 @@ fn registry() -> Registry {
 }
 
 fn trained(name: &str, continuous: bool) -> (Box<dyn Policy>, a2perf_core::EnvSpec) {
-    let mut alg = make_alg(name, &[("hidden_sizes", ints(&[8]))]);
+    trained_with(name, continuous, &[])
+}
+
+fn trained_with(
+    name: &str,
+    continuous: bool,
+    extra: &[(&str, Value)],
+) -> (Box<dyn Policy>, a2perf_core::EnvSpec) {
+    let mut hp = vec![("hidden_sizes", ints(&[8]))];
+    hp.extend(extra.iter().cloned());
+    let mut alg = make_alg(name, &hp);
     if continuous {
         let (p, _) = train(alg.as_mut(), || Box::new(Point::new()), 1, settings());
         (p, Point::new().spec().clone())
@@ -41,13 +51,15 @@ fn trained(name: &str, continuous: bool) -> (Box<dyn Policy>, a2perf_core::EnvSp
 #[test]
 fn round_trip_is_bit_exact_for_every_algorithm() {
     let reg = registry();
-    for (name, continuous) in [
-        ("ppo", false),
-        ("ppo", true),
-        ("ddqn", false),
-        ("sac", true),
+    let sac_norm = [("normalize_observations", Value::Bool(true))];
+    for (name, continuous, extra) in [
+        ("ppo", false, &[][..]),
+        ("ppo", true, &[][..]),
+        ("ddqn", false, &[][..]),
+        ("sac", true, &[][..]),
+        ("sac", true, &sac_norm[..]),
     ] {
-        let (mut policy, spec) = trained(name, continuous);
+        let (mut policy, spec) = trained_with(name, continuous, extra);
         let ckpt = policy.checkpoint().unwrap();
         let bytes = ckpt.to_bytes();
         let back = Checkpoint::from_bytes(&bytes).unwrap();

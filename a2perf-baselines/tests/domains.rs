@@ -245,25 +245,58 @@ fn random_mean_cost(reg: &Registry) -> f64 {
     let mut env = reg.make_env(CIRCUIT, &BTreeMap::new()).unwrap();
     let mut rp = RandomPolicy::new(env.spec().action_space.clone(), 7);
     (0..100)
-        .map(|s| -episode(env.as_mut(), &mut rp, s, ActMode::Explore).0)
+        .map(|s| {
+            let (_, _, proxy) = episode(env.as_mut(), &mut rp, s, ActMode::Explore);
+            proxy.expect("random legal placements of this netlist are feasible")
+        })
         .sum::<f64>()
         / 100.0
 }
 
+/// The proxy cost of the greedy placement. An infeasible episode (a macro left without a legal
+/// cell) fails the test rather than being read off its reward (−4 by default, A2Perf's −1 would
+/// look better than any placement here).
 fn greedy_cost(reg: &Registry, policy: &mut dyn Policy) -> f64 {
     let mut env = reg.make_env(CIRCUIT, &BTreeMap::new()).unwrap();
-    -episode(env.as_mut(), policy, 0, ActMode::Greedy).0
+    let (_, _, proxy) = episode(env.as_mut(), policy, 0, ActMode::Greedy);
+    proxy.expect("the greedy placement is feasible")
+}
+
+// The target: 10% below the mean proxy cost of 100 random legal placements. On this netlist
+// (seed 0 of `GeneratorConfig::small()`) the random mean is ~1.48 (std 0.08), the best of 100
+// random placements ~12% below it and a 1,500-step hill climb ~23% below (see
+// `circuit_cost_landscape`).
+fn assert_beats_random_placement(algo: &str, hp: &[(&str, Value)], total_env_steps: u64) {
+    let reg = registry();
+    let random = random_mean_cost(&reg);
+    let mut alg = make(&reg, algo, hp);
+    let settings = TrainingSettings {
+        total_env_steps,
+        eval_interval: 4_000,
+        eval_episodes: 1,
+        checkpoint_interval: 0,
+        num_envs: 4,
+    };
+    let (mut p, curve) = train_on(&reg, alg.as_mut(), CIRCUIT, &BTreeMap::new(), 0, settings);
+    let cost = greedy_cost(&reg, p.as_mut());
+    println!(
+        "{algo} circuit cost {cost} vs random {random} ({:.1}% below); curve {:?}",
+        100.0 * (1.0 - cost / random),
+        curve.returns()
+    );
+    assert!(
+        cost <= 0.90 * random,
+        "{algo} cost {cost} vs random mean {random}"
+    );
 }
 
 #[test]
-fn ppo_and_ddqn_beat_random_placement() {
-    if skip_in_debug("ppo_and_ddqn_beat_random_placement") {
+fn circuit_ppo_beats_random_placement() {
+    if skip_in_debug("circuit_ppo_beats_random_placement") {
         return;
     }
-    let reg = registry();
-    let random = random_mean_cost(&reg);
-    let mut ppo = make(
-        &reg,
+    // Today 18.0% below.
+    assert_beats_random_placement(
         "ppo",
         &[
             ("learning_rate", Value::Float(3e-3)),
@@ -275,34 +308,17 @@ fn ppo_and_ddqn_beat_random_placement() {
             ("latent_dim", Value::Int(16)),
             ("hidden_sizes", ints(&[64, 64])),
         ],
+        20_000,
     );
-    let s = TrainingSettings {
-        total_env_steps: 20_000,
-        eval_interval: 4_000,
-        eval_episodes: 1,
-        checkpoint_interval: 0,
-        num_envs: 4,
-    };
-    let (mut p, curve) = train_on(&reg, ppo.as_mut(), CIRCUIT, &BTreeMap::new(), 0, s.clone());
-    let cost = greedy_cost(&reg, p.as_mut());
-    println!(
-        "PPO circuit cost {cost} vs random {random}; curve {:?}",
-        curve.returns()
-    );
-    // The issue asks for 10% below the random mean, which this netlist does not allow under the
-    // paper's proxy weights: the best of 100 random placements is 6.0% below the mean and the
-    // best placement found by local search (hill climbing plus exhaustive single-macro sweeps,
-    // ~30,000 evaluations from 5 starts) 8.4% below it, because the density (~0.49) and
-    // congestion (~0.74) terms barely move. PPO reaches 4.0-5.5% here (seeds 1 and 2: ~4.5%):
-    // the exact figure moves with floating-point details of the standard-cell placer (three
-    // builds of a2perf-circuit gave random means 1.1646, 1.1641, 1.1623), hence the margin.
-    assert!(
-        cost <= 0.97 * random,
-        "PPO cost {cost} vs random mean {random}"
-    );
+}
 
-    let mut ddqn = make(
-        &reg,
+#[test]
+fn circuit_ddqn_beats_random_placement() {
+    if skip_in_debug("circuit_ddqn_beats_random_placement") {
+        return;
+    }
+    // Today 14.7% below.
+    assert_beats_random_placement(
         "ddqn",
         &[
             ("learning_rate", Value::Float(1e-3)),
@@ -316,21 +332,7 @@ fn ppo_and_ddqn_beat_random_placement() {
             ("latent_dim", Value::Int(16)),
             ("hidden_sizes", ints(&[64, 64])),
         ],
-    );
-    let s = TrainingSettings {
-        total_env_steps: 12_000,
-        ..s
-    };
-    let (mut q, curve) = train_on(&reg, ddqn.as_mut(), CIRCUIT, &BTreeMap::new(), 0, s);
-    let cost = greedy_cost(&reg, q.as_mut());
-    println!(
-        "DDQN circuit cost {cost} vs random {random}; curve {:?}",
-        curve.returns()
-    );
-    // DDQN reaches 4.7-6.4% here (seeds 1 and 2: ~5%); see the PPO assertion for the ceiling.
-    assert!(
-        cost <= 0.97 * random,
-        "DDQN cost {cost} vs random mean {random}"
+        12_000,
     );
 }
 
@@ -377,7 +379,10 @@ fn ppo_improves_the_pace_task() {
             ("num_steps", Value::Int(256)),
             ("minibatch_size", Value::Int(128)),
             ("hidden_sizes", ints(&[64, 64])),
-            ("init_log_std", Value::Float(-1.5)),
+            // The recorded config's exploration (configs/quadruped_locomotion/ppo.ron): std
+            // 0.135 rad and no entropy bonus.
+            ("init_log_std", Value::Float(-2.0)),
+            ("entropy_coef", Value::Float(0.0)),
         ],
     );
     let s = TrainingSettings {
@@ -393,7 +398,9 @@ fn ppo_improves_the_pace_task() {
         "PPO pace return {r} vs zero-action {base}; curve {:?}",
         curve.returns()
     );
-    assert!(r > base, "PPO {r} vs untrained {base}");
+    // Today 15.6 vs 2.77 (5.6x); with the earlier exploration (std 0.22, entropy bonus 1e-2)
+    // this budget only just beat standing still.
+    assert!(r > 3.0 * base, "PPO {r} vs untrained {base}");
 }
 
 #[test]
@@ -437,7 +444,9 @@ fn sac_improves_the_pace_task() {
 }
 
 /// Diagnostic (ignored): spread of random placements, the wirelength-hint greedy policy and the
-/// best placement a local search finds (the practical ceiling for the learning test).
+/// best placement a local search finds (a practical ceiling for the learning tests) on
+/// Synthetic-Small (netlist seed 0, the bank-structured generator). Run it with
+/// `cargo test --release -p a2perf-baselines --test domains circuit_cost_landscape -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn circuit_cost_landscape() {
@@ -445,7 +454,10 @@ fn circuit_cost_landscape() {
     let mut env = reg.make_env(CIRCUIT, &BTreeMap::new()).unwrap();
     let mut rp = RandomPolicy::new(env.spec().action_space.clone(), 7);
     let costs: Vec<f64> = (0..100)
-        .map(|s| -episode(env.as_mut(), &mut rp, s, ActMode::Explore).0)
+        .map(|s| {
+            let (_, _, proxy) = episode(env.as_mut(), &mut rp, s, ActMode::Explore);
+            proxy.expect("random legal placements of this netlist are feasible")
+        })
         .collect();
     let min = costs.iter().cloned().fold(f64::INFINITY, f64::min);
     struct Hint;
@@ -503,7 +515,8 @@ fn circuit_cost_landscape() {
                 break;
             }
         }
-        -step.reward
+        // An infeasible episode (reward −1) must not look like a cost of 1.
+        step.info.get("proxy").unwrap_or(f64::INFINITY)
     };
     let mut rng = a2perf_core::RngStream::new(1, "landscape");
     let mut acts: Vec<usize> = Vec::new();

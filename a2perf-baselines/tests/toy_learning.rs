@@ -167,28 +167,66 @@ fn ppo_improves_continuous_point() {
 #[test]
 fn sac_improves_continuous_point() {
     let base = point_baseline();
-    let mut alg = make_alg(
-        "sac",
-        &[
-            ("learning_rate", Value::Float(1e-3)),
-            ("batch_size", Value::Int(64)),
-            ("learning_starts", Value::Int(200)),
-            ("init_alpha", Value::Float(0.1)),
-            ("hidden_sizes", ints(&[32, 32])),
-        ],
-    );
-    let (mut p, curve) = train(
-        alg.as_mut(),
-        || Box::new(Point::new()),
-        6,
-        settings(2_500, 1),
-    );
-    let r = mean_return(&mut Point::new(), p.as_mut(), 40);
-    assert!(
-        r > 0.5 * base,
-        "SAC {r} vs zero-action {base}; curve {:?}",
-        curve.returns()
-    );
+    // With raw observations and with running observation normalisation.
+    for normalize in [false, true] {
+        let mut alg = make_alg(
+            "sac",
+            &[
+                ("learning_rate", Value::Float(1e-3)),
+                ("batch_size", Value::Int(64)),
+                ("learning_starts", Value::Int(200)),
+                ("init_alpha", Value::Float(0.1)),
+                ("hidden_sizes", ints(&[32, 32])),
+                ("normalize_observations", Value::Bool(normalize)),
+            ],
+        );
+        let (mut p, curve) = train(
+            alg.as_mut(),
+            || Box::new(Point::new()),
+            6,
+            settings(2_500, 1),
+        );
+        let r = mean_return(&mut Point::new(), p.as_mut(), 40);
+        assert!(
+            r > 0.5 * base,
+            "SAC (normalize_observations {normalize}) {r} vs zero-action {base}; curve {:?}",
+            curve.returns()
+        );
+    }
+}
+
+#[test]
+fn ppo_keeps_a_fixed_log_std_when_asked() {
+    let log_stds = |learn: bool| {
+        let mut alg = make_alg(
+            "ppo",
+            &[
+                ("learning_rate", Value::Float(3e-3)),
+                ("num_steps", Value::Int(64)),
+                ("hidden_sizes", ints(&[8])),
+                ("init_log_std", Value::Float(-1.25)),
+                ("learn_log_std", Value::Bool(learn)),
+            ],
+        );
+        let (p, _) = train(
+            alg.as_mut(),
+            || Box::new(Point::new()),
+            5,
+            settings(1_000, 2),
+        );
+        let ckpt = p.checkpoint().unwrap();
+        let policy =
+            a2perf_baselines::NetPolicy::from_checkpoint(&ckpt, Point::new().spec(), "ppo")
+                .unwrap();
+        match &policy.head {
+            a2perf_baselines::policy::Head::Gaussian(g) => {
+                policy.params[g.log_std..g.log_std + g.act_dim].to_vec()
+            }
+            _ => panic!("PPO on a box action space has a Gaussian head"),
+        }
+    };
+    assert!(log_stds(false).iter().all(|s| *s == -1.25));
+    assert!(log_stds(true).iter().any(|s| *s != -1.25));
 }
 
 fn bandit_oracle_dataset(n: usize) -> Dataset {

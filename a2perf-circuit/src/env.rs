@@ -6,8 +6,13 @@
 //! `cell = row·cols + col`) or, with `padded_action`, A2Perf's padded 128×128 layout. The macro's
 //! centre goes to the cell centre. Reward is 0 until the last macro; then soft macros and standard
 //! cells are placed by our force-directed placer ([`crate::placer`]) and the reward is
-//! `−proxy_cost`. If a macro has no legal cell left the episode terminates with reward −1.0
-//! (A2Perf's `INFEASIBLE_REWARD`; A2Perf also auto-resets, we leave that to the caller).
+//! `−proxy_cost`. If a macro has no legal cell left the episode terminates with reward
+//! `infeasible_reward`, by default [`INFEASIBLE_REWARD`] = −4.0 (circuit_training's current
+//! value). A2Perf's fork uses −1.0, which under its own proxy weights is *better* than most
+//! feasible placements (random legal placements of Ariane cost ≈ 1.40, good ones ≈ 1.15), so an
+//! agent could learn to make the placement infeasible on purpose; set `infeasible_reward = -1.0`
+//! ([`A2PERF_INFEASIBLE_REWARD`]) to reproduce the paper's environment. (A2Perf also auto-resets;
+//! we leave that to the caller.)
 //! Info at the end: `wirelength` (the wirelength cost), `density`, `congestion`, `proxy`,
 //! `wirelength_hpwl`, `infeasible`.
 //!
@@ -44,8 +49,11 @@ use crate::netlist::{Netlist, NodeKind, SoftMacroRule};
 use crate::placer::{FdSchedule, FdScratch, place_std_cells};
 use crate::plc::Placement;
 
-/// Reward when a macro has no legal cell left (A2Perf fork value).
-pub const INFEASIBLE_REWARD: f64 = -1.0;
+/// Default reward when a macro has no legal cell left: circuit_training's current value, below
+/// the proxy cost of any realistic feasible placement.
+pub const INFEASIBLE_REWARD: f64 = -4.0;
+/// A2Perf's fork value of the infeasible reward (the paper's environment; see the module docs).
+pub const A2PERF_INFEASIBLE_REWARD: f64 = -1.0;
 /// Side of A2Perf's padded action canvas.
 pub const PADDED_GRID: usize = 128;
 /// Side of the downsampled maps in `features`.
@@ -88,6 +96,8 @@ pub struct CircuitEnvConfig {
     pub fd_schedule: FdSchedule,
     /// Proxy weights.
     pub weights: CostWeights,
+    /// Reward of an episode that ends because a macro has no legal cell left.
+    pub infeasible_reward: f64,
 }
 
 impl Default for CircuitEnvConfig {
@@ -98,6 +108,7 @@ impl Default for CircuitEnvConfig {
             std_cell_placement: true,
             fd_schedule: FdSchedule::default(),
             weights: CostWeights::default(),
+            infeasible_reward: INFEASIBLE_REWARD,
         }
     }
 }
@@ -321,6 +332,10 @@ impl CircuitEnv {
             } else {
                 "none".into()
             },
+        );
+        metadata.insert(
+            "infeasible_reward".into(),
+            config.infeasible_reward.to_string(),
         );
         metadata.insert(
             "action_layout".into(),
@@ -693,7 +708,7 @@ impl Env for CircuitEnv {
             out.reward = -0.0;
             out.terminated = false;
         } else {
-            out.reward = INFEASIBLE_REWARD;
+            out.reward = self.config.infeasible_reward;
             out.terminated = true;
             self.needs_reset = true;
             out.info.set("infeasible", 1.0);
@@ -736,6 +751,12 @@ fn common_params() -> Vec<ParamSpec> {
             ParamKind::Float,
             Value::Float(0.5),
             "proxy weight of the congestion cost",
+        ),
+        ParamSpec::new(
+            "infeasible_reward",
+            ParamKind::Float,
+            Value::Float(INFEASIBLE_REWARD),
+            "reward when a macro has no legal cell left (A2Perf's fork: -1.0, better than most feasible placements)",
         ),
         ParamSpec::new(
             "smooth_range",
@@ -801,7 +822,21 @@ fn config_from(
         std_cell_placement: p.str("std_cell_placer").map_err(perr)? == "fd",
         fd_schedule: FdSchedule::default(),
         weights,
+        infeasible_reward: infeasible_reward(p)?,
     })
+}
+
+fn infeasible_reward(p: &Params) -> Result<f64, EnvError> {
+    let r = p
+        .f64("infeasible_reward")
+        .map_err(|e| bad_param("infeasible_reward", e.to_string()))?;
+    if !r.is_finite() || r > 0.0 {
+        return Err(bad_param(
+            "infeasible_reward",
+            format!("must be a finite value <= 0, found {r}"),
+        ));
+    }
+    Ok(r)
 }
 
 fn file_env(id: &str, p: &Params) -> Result<Box<dyn Env>, EnvError> {

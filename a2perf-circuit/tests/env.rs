@@ -3,7 +3,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use a2perf_circuit::env::{FEATURE_DIM, GRID_CHANNELS};
+use a2perf_circuit::env::{
+    A2PERF_INFEASIBLE_REWARD, FEATURE_DIM, GRID_CHANNELS, INFEASIBLE_REWARD,
+};
 use a2perf_core::{Action, Env, Registry, RngStream, Space, Value};
 
 fn registry() -> Registry {
@@ -109,7 +111,7 @@ fn small_episode_layout_and_rewards() {
     let (r2, _, _) = random_episode(env.as_mut(), 1);
     assert_eq!(r1, r2, "same actions give the same reward");
     if info.iter().any(|(k, v)| k == "infeasible" && *v == 1.0) {
-        assert_eq!(r1, -1.0);
+        assert_eq!(r1, a2perf_circuit::env::INFEASIBLE_REWARD);
     } else {
         assert_eq!(steps, 12);
         let get = |k: &str| info.iter().find(|(kk, _)| kk == k).unwrap().1;
@@ -227,4 +229,103 @@ fn toy_macro_with_shared_files() {
     let step = env.step(&Action::Discrete(legal[0])).unwrap();
     assert!(step.done() && step.reward < 0.0);
     assert!(step.info.get("wirelength").unwrap() > 0.0);
+}
+
+/// Replays `actions` and returns the final reward, whether the episode ended infeasible, and the
+/// number of steps taken.
+fn replay(env: &mut dyn Env, seed: u64, actions: &[usize]) -> (f64, bool, usize) {
+    env.reset(Some(seed)).unwrap();
+    for (i, &a) in actions.iter().enumerate() {
+        let step = env.step(&Action::Discrete(a)).unwrap();
+        if step.done() {
+            let infeasible = step.info.iter().any(|(k, v)| k == "infeasible" && v == 1.0);
+            return (step.reward, infeasible, i + 1);
+        }
+    }
+    panic!("the episode did not end");
+}
+
+#[test]
+fn infeasible_reward_is_below_feasible_placements_with_an_a2perf_switch() {
+    // A coarser grid (12×12 instead of 16×16) leaves fewer legal cells, so some random
+    // placements strand a macro.
+    let reg = registry();
+    let coarse = |extra: &[(&str, Value)]| {
+        let mut p: BTreeMap<String, Value> = [
+            ("grid_cols".to_string(), Value::Int(12)),
+            ("grid_rows".to_string(), Value::Int(12)),
+        ]
+        .into_iter()
+        .collect();
+        for (k, v) in extra {
+            p.insert(k.to_string(), v.clone());
+        }
+        reg.make_env("CircuitTraining-Synthetic-Small-v0", &p)
+            .unwrap()
+    };
+    let mut env = coarse(&[]);
+    assert_eq!(
+        env.spec()
+            .metadata
+            .get("infeasible_reward")
+            .map(String::as_str),
+        Some("-4")
+    );
+    let space = env.spec().action_space.clone();
+    let (mut infeasible_run, mut worst_feasible) = (None, f64::INFINITY);
+    for seed in 0..200u64 {
+        let mut rng = RngStream::new(seed, "test/infeasible");
+        let mut obs = env.reset(Some(seed)).unwrap();
+        let mut actions = Vec::new();
+        loop {
+            let Some(Action::Discrete(a)) = space.sample(&mut rng, obs.action_mask.as_deref())
+            else {
+                panic!("a legal action while the episode runs");
+            };
+            actions.push(a);
+            let step = env.step(&Action::Discrete(a)).unwrap();
+            if step.done() {
+                let infeasible = step.info.iter().any(|(k, v)| k == "infeasible" && v == 1.0);
+                if infeasible {
+                    assert_eq!(step.reward, INFEASIBLE_REWARD);
+                    infeasible_run.get_or_insert((seed, actions.clone()));
+                } else {
+                    worst_feasible = worst_feasible.min(step.reward);
+                }
+                break;
+            }
+            obs = step.observation;
+        }
+    }
+    let (seed, actions) = infeasible_run.expect("an infeasible episode in 200 random ones");
+    assert!(worst_feasible.is_finite(), "some feasible episodes too");
+    // The default ranks every infeasible episode below every feasible one met here; A2Perf's
+    // value does not (a feasible placement of this netlist costs more than 1).
+    assert!(INFEASIBLE_REWARD < worst_feasible, "{worst_feasible}");
+    assert!(
+        A2PERF_INFEASIBLE_REWARD > worst_feasible,
+        "{worst_feasible}"
+    );
+    // The same actions under the compatibility switch end the same way, with A2Perf's reward.
+    let mut a2perf = coarse(&[("infeasible_reward", Value::Float(A2PERF_INFEASIBLE_REWARD))]);
+    assert_eq!(
+        replay(a2perf.as_mut(), seed, &actions),
+        (A2PERF_INFEASIBLE_REWARD, true, actions.len())
+    );
+    assert_eq!(
+        replay(env.as_mut(), seed, &actions),
+        (INFEASIBLE_REWARD, true, actions.len())
+    );
+    // A positive "penalty" is refused with the parameter's name.
+    let err = reg
+        .make_env(
+            "CircuitTraining-Synthetic-Small-v0",
+            &[("infeasible_reward".to_string(), Value::Float(0.5))]
+                .into_iter()
+                .collect(),
+        )
+        .err()
+        .expect("a positive infeasible reward is an error")
+        .to_string();
+    assert!(err.contains("infeasible_reward"), "{err}");
 }
