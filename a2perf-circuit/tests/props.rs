@@ -117,6 +117,31 @@ proptest! {
     }
 
     #[test]
+    fn generator_handles_odd_configs(
+        seed in 0u64..100,
+        hard in 0usize..14,
+        soft in 0usize..40,
+        bank_size in 0usize..20,
+        bank_logic in 0.0f64..=1.0,
+        bus in 0.0f64..=1.0,
+    ) {
+        // Any bank size (0 = one macro per bank), fraction or macro count (0 = at least one)
+        // gives a circuit that parses back identically.
+        let cfg = GeneratorConfig {
+            num_hard_macros: hard,
+            num_soft_macros: soft,
+            bank_size,
+            bank_logic_fraction: bank_logic,
+            bus_fraction: bus,
+            ..GeneratorConfig::small()
+        };
+        let g = generate(&cfg, seed);
+        let back = Netlist::parse(&g.netlist.to_pbtxt(), SoftMacroRule::default()).unwrap();
+        prop_assert_eq!(&back.nodes, &g.netlist.nodes);
+        prop_assert_eq!(&back.nets, &g.netlist.nets);
+    }
+
+    #[test]
     fn placements_round_trip(entries in prop::collection::vec((0usize..100_000, -1e6f64..1e6, -1e6f64..1e6, 0usize..9, any::<bool>()), 0..50),
                              comments in prop::collection::vec("[ -~]{0,40}", 0..5)) {
         let orients = ["N", "FN", "S", "FS", "E", "FE", "W", "FW"];
