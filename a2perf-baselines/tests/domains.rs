@@ -241,7 +241,8 @@ fn bc_clones_the_web_oracle() {
 
 const CIRCUIT: &str = "CircuitTraining-Synthetic-Small-v0";
 
-fn random_mean_cost(reg: &Registry) -> f64 {
+/// Proxy costs of 100 random legal placements (policy seed 7, episode seeds 0..100).
+fn random_costs(reg: &Registry) -> Vec<f64> {
     let mut env = reg.make_env(CIRCUIT, &BTreeMap::new()).unwrap();
     let mut rp = RandomPolicy::new(env.spec().action_space.clone(), 7);
     (0..100)
@@ -249,8 +250,11 @@ fn random_mean_cost(reg: &Registry) -> f64 {
             let (_, _, proxy) = episode(env.as_mut(), &mut rp, s, ActMode::Explore);
             proxy.expect("random legal placements of this netlist are feasible")
         })
-        .sum::<f64>()
-        / 100.0
+        .collect()
+}
+
+fn random_mean_cost(reg: &Registry) -> f64 {
+    random_costs(reg).iter().sum::<f64>() / 100.0
 }
 
 /// The proxy cost of the greedy placement. An infeasible episode (a macro left without a legal
@@ -451,14 +455,8 @@ fn sac_improves_the_pace_task() {
 #[ignore]
 fn circuit_cost_landscape() {
     let reg = registry();
+    let costs = random_costs(&reg);
     let mut env = reg.make_env(CIRCUIT, &BTreeMap::new()).unwrap();
-    let mut rp = RandomPolicy::new(env.spec().action_space.clone(), 7);
-    let costs: Vec<f64> = (0..100)
-        .map(|s| {
-            let (_, _, proxy) = episode(env.as_mut(), &mut rp, s, ActMode::Explore);
-            proxy.expect("random legal placements of this netlist are feasible")
-        })
-        .collect();
     let min = costs.iter().cloned().fold(f64::INFINITY, f64::min);
     struct Hint;
     impl Policy for Hint {
@@ -515,7 +513,7 @@ fn circuit_cost_landscape() {
                 break;
             }
         }
-        // An infeasible episode (reward −1) must not look like a cost of 1.
+        // An infeasible episode ranks below every placement, whatever its reward.
         step.info.get("proxy").unwrap_or(f64::INFINITY)
     };
     let mut rng = a2perf_core::RngStream::new(1, "landscape");

@@ -195,6 +195,7 @@ pub fn generate(config: &GeneratorConfig, seed: u64) -> GeneratedCircuit {
     let bank_size = config.bank_size.clamp(1, nh);
     let nb = nh.div_ceil(bank_size);
     let bank_of = |m: usize| m / bank_size;
+    let bank_macros = |b: usize| b * bank_size..((b + 1) * bank_size).min(nh);
     // Hard macro size classes: aspect ratios 0.5..2, a random share of the target area.
     let classes = config.size_classes.clamp(1, nb);
     let mut class_aspect = Vec::new();
@@ -372,7 +373,7 @@ pub fn generate(config: &GeneratorConfig, seed: u64) -> GeneratedCircuit {
     // Hard-macro input pins (odd pins) of a bank.
     let bank_inputs: Vec<Vec<usize>> = (0..nb)
         .map(|b| {
-            (b * bank_size..((b + 1) * bank_size).min(nh))
+            bank_macros(b)
                 .flat_map(|m| hard_pins[m].iter().skip(1).step_by(2).copied())
                 .collect()
         })
@@ -425,7 +426,7 @@ pub fn generate(config: &GeneratorConfig, seed: u64) -> GeneratedCircuit {
         for (k, &driver) in outs.iter().enumerate() {
             if k == 0 && g < nb && rng.uniform() < config.bus_fraction {
                 // An address/control bus: one input pin on every macro of the bank.
-                let sinks: Vec<usize> = (g * bank_size..((g + 1) * bank_size).min(nh))
+                let sinks: Vec<usize> = bank_macros(g)
                     .map(|m| {
                         let pins = &hard_pins[m];
                         let inputs = pins.len() / 2;
@@ -443,43 +444,37 @@ pub fn generate(config: &GeneratorConfig, seed: u64) -> GeneratedCircuit {
             add_net(&mut nodes, &mut rng, driver, g, d);
         }
     }
-    // Hard-macro output pins (even pins) drive their bank's logic (read data).
+    // Up to `d − 1` distinct soft-macro input pins, each from the group `group_of` draws.
+    let soft_sinks = |rng: &mut RngStream, d: usize, group_of: &dyn Fn(&mut RngStream) -> usize| {
+        let mut sinks = Vec::new();
+        for _ in 0..4 * d {
+            if sinks.len() + 1 >= d {
+                break;
+            }
+            let g = group_of(rng);
+            if let Some(s) = any_soft(rng, g)
+                && !sinks.contains(&s)
+            {
+                sinks.push(s);
+            }
+        }
+        sinks
+    };
+    // Hard-macro output pins (even pins) drive their bank's logic (read data), now and then the
+    // core.
     for (m, pins) in hard_pins.iter().enumerate() {
         for &p in pins.iter().step_by(2) {
             let d = 2 + rng.index(3);
             let b = bank_of(m);
-            let mut sinks = Vec::new();
-            for _ in 0..4 * d {
-                if sinks.len() + 1 >= d {
-                    break;
-                }
-                let g = if rng.uniform() < 0.85 { b } else { nb };
-                if let Some(s) = any_soft(&mut rng, g)
-                    && !sinks.contains(&s)
-                {
-                    sinks.push(s);
-                }
-            }
-            nodes[p].inputs = sinks;
+            nodes[p].inputs = soft_sinks(&mut rng, d, &|rng: &mut RngStream| {
+                if rng.uniform() < 0.85 { b } else { nb }
+            });
         }
     }
     // Input ports (even ports) drive the core logic.
-    for p in 0..config.num_ports {
-        if p % 2 == 0 {
-            let d = 2 + rng.index(3);
-            let mut sinks = Vec::new();
-            for _ in 0..4 * d {
-                if sinks.len() + 1 >= d {
-                    break;
-                }
-                if let Some(s) = any_soft(&mut rng, nb)
-                    && !sinks.contains(&s)
-                {
-                    sinks.push(s);
-                }
-            }
-            nodes[port_base + p].inputs = sinks;
-        }
+    for p in (0..config.num_ports).step_by(2) {
+        let d = 2 + rng.index(3);
+        nodes[port_base + p].inputs = soft_sinks(&mut rng, d, &|_: &mut RngStream| nb);
     }
     let mut netlist = Netlist {
         name: config.name.clone(),

@@ -111,7 +111,7 @@ fn small_episode_layout_and_rewards() {
     let (r2, _, _) = random_episode(env.as_mut(), 1);
     assert_eq!(r1, r2, "same actions give the same reward");
     if info.iter().any(|(k, v)| k == "infeasible" && *v == 1.0) {
-        assert_eq!(r1, a2perf_circuit::env::INFEASIBLE_REWARD);
+        assert_eq!(r1, INFEASIBLE_REWARD);
     } else {
         assert_eq!(steps, 12);
         let get = |k: &str| info.iter().find(|(kk, _)| kk == k).unwrap().1;
