@@ -1,12 +1,13 @@
-//! The `a2perf` command: lists, benchmarks and (as the pipelines land) trains, infers and reports.
+//! The `a2perf` command: a thin clap layer over `a2perf_pipeline` and the domain crates.
 
-use a2perf_cli::registry;
+use a2perf_pipeline::registry;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod bench;
 mod circuit_cmd;
 mod config_cmd;
+mod list;
 mod locomotion_cmd;
 mod metrics_cmd;
 mod pipeline_cmd;
@@ -49,7 +50,6 @@ enum Command {
     Run(pipeline_cmd::RunArgs),
     /// Evaluate checkpoints, assign expertise levels and collect offline datasets.
     Collect(pipeline_cmd::CollectArgs),
-    // DOMAIN-SUBCOMMANDS (helpers add their variants above this line)
 }
 
 fn main() {
@@ -82,7 +82,7 @@ fn error_chain(err: &anyhow::Error) -> String {
 fn run(cli: Cli) -> Result<()> {
     let registry = registry::full_registry();
     match cli.command {
-        Command::List => Ok(registry::print_list(&registry)?),
+        Command::List => Ok(list::print_list(&registry)?),
         Command::Bench(args) => bench::run(&registry, &args),
         Command::Config(args) => config_cmd::run(&registry, &args),
         Command::Web(args) => web_cmd::run(&args),
@@ -95,6 +95,5 @@ fn run(cli: Cli) -> Result<()> {
         Command::Report(args) => pipeline_cmd::report(&args),
         Command::Run(args) => pipeline_cmd::run(&registry, &args),
         Command::Collect(args) => pipeline_cmd::collect(&registry, &args),
-        // DOMAIN-DISPATCH (helpers add their match arms above this line)
     }
 }

@@ -1,15 +1,15 @@
 //! `a2perf train | infer | generalize | report | run | collect`: the clap front end of the
-//! pipelines in `a2perf_cli::pipeline`.
+//! pipelines in `a2perf_pipeline`. Parsing arguments and printing results is all it does.
 
 use std::path::{Path, PathBuf};
 
-use a2perf_cli::pipeline::{
-    self, CancelToken, ExperimentPlan, InferOptions, ObservationSource, TrainOptions,
+use a2perf_core::Registry;
+use a2perf_pipeline::{
+    self as pipeline, CancelToken, ExperimentPlan, InferOptions, ObservationSource, TrainOptions,
     collect::{CollectOptions, CostRule},
     report::ReportOptions,
 };
-use a2perf_core::Registry;
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 
 /// Arguments of `a2perf train`.
@@ -172,15 +172,7 @@ fn cancel_on_ctrl_c() -> CancelToken {
 }
 
 fn expand_runs(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for d in dirs {
-        let found = pipeline::find_runs(d)?;
-        if found.is_empty() {
-            bail!("{}: no run directories (no run.json) found", d.display());
-        }
-        out.extend(found);
-    }
-    Ok(out)
+    Ok(pipeline::expand_runs(dirs)?)
 }
 
 fn load(
@@ -214,20 +206,18 @@ fn train_plans(
         show_progress: !quiet,
     };
     let summary = pipeline::train(registry, &grid, &opts)?;
+    print_train_summary(&summary);
+    Ok(pipeline::run::check_trained(&summary, cancel)?)
+}
+
+fn print_train_summary(summary: &pipeline::TrainSummary) {
     let done = summary.with(&pipeline::RunOutcome::Completed).len();
     let skipped = summary.with(&pipeline::RunOutcome::Skipped).len();
     let cancelled = summary.with(&pipeline::RunOutcome::Cancelled).len();
-    eprintln!("train: {done} trained, {skipped} already complete, {cancelled} not finished");
-    for (dir, why) in summary.failures() {
-        eprintln!("  failed: {}: {why}", dir.display());
-    }
-    if cancel.is_cancelled() {
-        return Err(pipeline::PipelineError::Cancelled.into());
-    }
-    if !summary.failures().is_empty() {
-        bail!("{} run(s) failed", summary.failures().len());
-    }
-    Ok(())
+    let failed = summary.failures().len();
+    eprintln!(
+        "train: {done} trained, {skipped} already complete, {cancelled} not finished, {failed} failed"
+    );
 }
 
 /// `a2perf train`.
@@ -245,19 +235,23 @@ pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
     )
 }
 
+fn print_inference(dir: &Path, r: &pipeline::InferenceResults) {
+    println!(
+        "{}: return {:.3} ± {:.3} over {} episodes; inference {:.4} ms/call (p99 {:.4})",
+        dir.display(),
+        r.returns.mean,
+        r.returns.std,
+        r.episodes,
+        r.inference_time_ms.mean,
+        r.inference_time_ms.p99
+    );
+}
+
 fn infer_dirs(registry: &Registry, dirs: &[PathBuf], opts: &InferOptions) -> Result<()> {
     for dir in dirs {
         let r = pipeline::infer_run(registry, dir, opts)
             .with_context(|| format!("infer {}", dir.display()))?;
-        println!(
-            "{}: return {:.3} ± {:.3} over {} episodes; inference {:.4} ms/call (p99 {:.4})",
-            dir.display(),
-            r.returns.mean,
-            r.returns.std,
-            r.episodes,
-            r.inference_time_ms.mean,
-            r.inference_time_ms.p99
-        );
+        print_inference(dir, &r);
     }
     Ok(())
 }
@@ -277,6 +271,30 @@ pub fn infer(registry: &Registry, args: &InferArgs) -> Result<()> {
     infer_dirs(registry, &expand_runs(&args.dirs)?, &opts)
 }
 
+fn print_generalization(dir: &Path, r: &pipeline::GeneralizationResults) {
+    let per_task: Vec<String> = r
+        .tasks
+        .iter()
+        .map(|t| match (t.mean_return, &t.error) {
+            (Some(m), _) => format!("{} {m:.3}", t.name),
+            (None, Some(e)) => format!("{} failed ({e})", t.name),
+            (None, None) => format!("{} —", t.name),
+        })
+        .collect();
+    match r.sum_of_mean_returns {
+        Some(s) => println!(
+            "{}: generalization {s:.3} = {}",
+            dir.display(),
+            per_task.join(" + ")
+        ),
+        None => println!(
+            "{}: generalization incomplete: {}",
+            dir.display(),
+            per_task.join(", ")
+        ),
+    }
+}
+
 fn generalize_dirs(
     registry: &Registry,
     dirs: &[PathBuf],
@@ -286,27 +304,7 @@ fn generalize_dirs(
     for dir in dirs {
         let r = pipeline::generalize_run(registry, dir, episodes, !quiet)
             .with_context(|| format!("generalize {}", dir.display()))?;
-        let per_task: Vec<String> = r
-            .tasks
-            .iter()
-            .map(|t| match (t.mean_return, &t.error) {
-                (Some(m), _) => format!("{} {m:.3}", t.name),
-                (None, Some(e)) => format!("{} failed ({e})", t.name),
-                (None, None) => format!("{} —", t.name),
-            })
-            .collect();
-        match r.sum_of_mean_returns {
-            Some(s) => println!(
-                "{}: generalization {s:.3} = {}",
-                dir.display(),
-                per_task.join(" + ")
-            ),
-            None => println!(
-                "{}: generalization incomplete: {}",
-                dir.display(),
-                per_task.join(", ")
-            ),
-        }
+        print_generalization(dir, &r);
     }
     Ok(())
 }
@@ -321,27 +319,7 @@ pub fn generalize(registry: &Registry, args: &GeneralizeArgs) -> Result<()> {
     )
 }
 
-fn bootstrap_reps(dirs: &[PathBuf]) -> Result<usize> {
-    for d in dirs {
-        if let Some(run) = pipeline::find_runs(d)?.first() {
-            return Ok(pipeline::LoadedRun::open(run)?
-                .record
-                .metrics
-                .bootstrap_reps);
-        }
-    }
-    Ok(pipeline::MetricSettings::default().bootstrap_reps)
-}
-
-fn write_report(dirs: &[PathBuf], out: &Path, reps: Option<usize>) -> Result<()> {
-    let opts = ReportOptions {
-        bootstrap_reps: match reps {
-            Some(r) => r,
-            None => bootstrap_reps(dirs)?,
-        },
-        seed: 0,
-    };
-    let report = pipeline::report::write_report(dirs, out, &opts)?;
+fn print_report(out: &Path, report: &pipeline::report::Report) {
     println!(
         "report: {} (task, algorithm) groups -> {}",
         report.groups.len(),
@@ -350,6 +328,18 @@ fn write_report(dirs: &[PathBuf], out: &Path, reps: Option<usize>) -> Result<()>
     for (dir, why) in &report.skipped_runs {
         eprintln!("  left out {dir}: {why}");
     }
+}
+
+fn write_report(dirs: &[PathBuf], out: &Path, reps: Option<usize>) -> Result<()> {
+    let opts = ReportOptions {
+        bootstrap_reps: match reps {
+            Some(r) => r,
+            None => pipeline::run::recorded_bootstrap_reps(dirs)?,
+        },
+        seed: 0,
+    };
+    let report = pipeline::report::write_report(dirs, out, &opts)?;
+    print_report(out, &report);
     Ok(())
 }
 
@@ -365,57 +355,21 @@ pub fn report(args: &ReportArgs) -> Result<()> {
 /// `a2perf run`: train → infer → generalize → report.
 pub fn run(registry: &Registry, args: &RunArgs) -> Result<()> {
     let loaded = load(registry, &args.configs, &args.set, args.seeds.as_deref())?;
-    let cancel = cancel_on_ctrl_c();
-    eprintln!("== train");
-    train_plans(
-        registry,
-        &loaded.plans,
-        None,
-        args.jobs,
-        args.quiet,
-        &cancel,
-    )?;
-    let mut experiments: Vec<PathBuf> = loaded.plans.iter().map(|p| p.experiment_dir()).collect();
-    experiments.dedup();
-    let runs: Vec<PathBuf> = loaded
-        .plans
-        .iter()
-        .flat_map(|p| p.seeds.iter().map(|s| p.run_dir(*s)))
-        .collect();
-    eprintln!("== infer");
-    let opts = InferOptions {
+    let opts = pipeline::RunOptions {
+        jobs: args.jobs,
+        cancel: cancel_on_ctrl_c(),
         meters: pipeline::meters::system_meters(),
         show_progress: !args.quiet,
-        ..Default::default()
+        report_dir: args.output.clone().or(loaded.report_dir),
     };
-    for dir in &runs {
-        if cancel.is_cancelled() {
-            return Err(pipeline::PipelineError::Cancelled.into());
-        }
-        // Resuming `run`: a phase already done for a run is not redone (a retrained run
-        // starts from an empty directory, so its old results cannot linger).
-        if dir.join(pipeline::INFERENCE_FILE).is_file() {
-            continue;
-        }
-        infer_dirs(registry, std::slice::from_ref(dir), &opts)?;
-    }
-    eprintln!("== generalize");
-    for dir in &runs {
-        if cancel.is_cancelled() {
-            return Err(pipeline::PipelineError::Cancelled.into());
-        }
-        if dir.join(pipeline::GENERALIZATION_FILE).is_file() {
-            continue;
-        }
-        generalize_dirs(registry, std::slice::from_ref(dir), None, args.quiet)?;
-    }
-    eprintln!("== report");
-    let out = args
-        .output
-        .clone()
-        .or(loaded.report_dir)
-        .unwrap_or_else(|| experiments[0].join("report"));
-    write_report(&experiments, &out, None)
+    pipeline::run_experiments(registry, &loaded.plans, &opts, &mut |event| match event {
+        pipeline::RunEvent::Phase(name) => eprintln!("== {name}"),
+        pipeline::RunEvent::Trained(summary) => print_train_summary(summary),
+        pipeline::RunEvent::Inferred(dir, r) => print_inference(dir, r),
+        pipeline::RunEvent::Generalized(dir, r) => print_generalization(dir, r),
+        pipeline::RunEvent::Reported(out, report) => print_report(out, report),
+    })?;
+    Ok(())
 }
 
 /// `a2perf collect`.

@@ -1,17 +1,6 @@
-//! The registry the binary uses: every domain's environments and every built-in algorithm.
+//! `a2perf list`: every registered environment and algorithm with its typed parameters.
 
 use a2perf_core::Registry;
-
-/// All environments and algorithms shipped with the benchmark.
-pub fn full_registry() -> Registry {
-    let mut reg = Registry::new();
-    a2perf_web::register(&mut reg);
-    a2perf_locomotion::register(&mut reg);
-    a2perf_circuit::register(&mut reg);
-    a2perf_baselines::register(&mut reg);
-    // DOMAIN-REGISTER (helpers add `a2perf_<domain>::register(&mut reg);` above this line)
-    reg
-}
 
 /// Prints environments and algorithms with their parameters. A closed pipe (`a2perf list | head`)
 /// ends the listing quietly.

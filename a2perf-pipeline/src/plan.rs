@@ -304,7 +304,7 @@ pub struct RunJob {
 /// seeds), optionally restricted to one shard.
 ///
 /// ```
-/// use a2perf_cli::pipeline::{grid, AlgorithmSpec, ExperimentPlan, Shard, TaskSpec};
+/// use a2perf_pipeline::{grid, AlgorithmSpec, ExperimentPlan, Shard, TaskSpec};
 /// let task = TaskSpec { name: "t".into(), env_id: "T-v0".into(), env_params: Default::default() };
 /// let algo = AlgorithmSpec { name: "a".into(), params: Default::default() };
 /// let plan = ExperimentPlan::new("e", "/tmp/out", task, algo, vec![0, 1, 2], Default::default());
@@ -371,7 +371,7 @@ impl FromStr for Shard {
 /// Parses a seed list: `0..10` (exclusive), `0..=9`, `3`, or a comma list of those.
 ///
 /// ```
-/// use a2perf_cli::pipeline::parse_seeds;
+/// use a2perf_pipeline::parse_seeds;
 /// assert_eq!(parse_seeds("0..3").unwrap(), vec![0, 1, 2]);
 /// assert_eq!(parse_seeds("1,4..=5").unwrap(), vec![1, 4, 5]);
 /// assert!(parse_seeds("3..1").is_err());

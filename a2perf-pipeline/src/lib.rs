@@ -1,4 +1,27 @@
-//! The benchmark pipelines: train → infer → generalize → report, plus dataset collection.
+//! # a2perf-pipeline
+//!
+//! The benchmark pipelines as a library: plan, train, infer, generalize, collect and report,
+//! plus the registry of every built-in environment and algorithm. The `a2perf` command
+//! (`a2perf-cli`) and the Python package (`python/`) are two front ends over it; a participant's
+//! own binary or test can call it with its own [`Registry`](a2perf_core::Registry):
+//!
+//! - [`train`]: one run per (task, algorithm, seed), resumable, shardable;
+//! - [`infer_run`]: rollouts and per-call inference time of a trained policy;
+//! - [`generalize_run`]: returns on every task of the domain's generalization suite;
+//! - [`collect`]: checkpoint evaluation, expertise levels and offline datasets;
+//! - [`report`]: the paper's four-category tables, plots and a leaderboard entry;
+//! - [`run_experiments`]: all of the above in order, skipping what is already on disk.
+//!
+//! ```
+//! use a2perf_pipeline::Shard;
+//! let shard: Shard = "1/4".parse().unwrap();
+//! assert!(shard.contains(5) && !shard.contains(4));
+//! ```
+//!
+//! It deliberately does not schedule work across machines: a shard (`--shard i/N`) lets an
+//! existing batch system (Slurm job arrays, Kubernetes indexed jobs) spread a sweep, and
+//! [`report`] merges the result directories. It prints nothing but progress bars (when asked):
+//! messages are the front ends' business.
 //!
 //! Every pipeline works on plain directories. An experiment directory
 //! `OUTPUT/EXPERIMENT_NAME/` holds one run directory per (task, algorithm, seed), named
@@ -18,6 +41,8 @@
 //! | `generalization.json` | generalize | per-task mean returns and their sum |
 //! | `collect/` | collect | checkpoint evaluations, expertise levels, datasets |
 
+#![warn(missing_docs)]
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -36,7 +61,9 @@ pub mod meters;
 pub mod minari;
 pub mod plan;
 pub mod progress;
+pub mod registry;
 pub mod report;
+pub mod run;
 pub mod stats;
 pub mod sysinfo;
 pub mod train;
@@ -48,6 +75,7 @@ pub use plan::{
     MetricSettings, ObservationSource, RunJob, Shard, Suite, TaskSpec, from_experiment, grid,
     load_plans, parse_seeds,
 };
+pub use run::{RunEvent, RunOptions, expand_runs, run_experiments};
 pub use sysinfo::SystemInfo;
 pub use train::{MeterFactory, RunOutcome, TrainOptions, TrainSummary, train, train_one};
 

@@ -4,9 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
-use a2perf_cli::pipeline::load_plans;
-use a2perf_cli::registry::full_registry;
 use a2perf_core::Experiment;
+use a2perf_pipeline::load_plans;
+use a2perf_pipeline::registry::full_registry;
 
 fn ron_files(dir: &Path, out: &mut Vec<PathBuf>) {
     let mut entries: Vec<_> = std::fs::read_dir(dir)

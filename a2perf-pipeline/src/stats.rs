@@ -28,7 +28,7 @@ impl Summary {
     /// Summarises `values`.
     ///
     /// ```
-    /// use a2perf_cli::pipeline::stats::Summary;
+    /// use a2perf_pipeline::stats::Summary;
     /// let s = Summary::of(&[1.0, 2.0, 3.0, 4.0]);
     /// assert_eq!((s.mean, s.median, s.min, s.max), (2.5, 2.5, 1.0, 4.0));
     /// assert!((s.std - 1.25f64.sqrt()).abs() < 1e-12);

@@ -8,7 +8,7 @@ use super::{Category, Group, GroupReport, MetricValue, Report};
 /// The original's number format: two decimals, or scientific notation below 0.01.
 ///
 /// ```
-/// use a2perf_cli::pipeline::report::render::format_value;
+/// use a2perf_pipeline::report::render::format_value;
 /// assert_eq!(format_value(12.345), "12.35");
 /// assert_eq!(format_value(0.00123), "1.23e-3");
 /// assert_eq!(format_value(0.0), "0.00");

@@ -2,8 +2,6 @@
 
 mod common;
 
-use a2perf_cli::pipeline;
-
 fn write(dir: &std::path::Path, name: &str, text: &str) -> std::path::PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
@@ -35,7 +33,7 @@ fn suites_apply_their_overrides_in_order() {
         )"#,
     );
     let reg = common::registry();
-    let loaded = pipeline::load_plans(
+    let loaded = a2perf_pipeline::load_plans(
         std::slice::from_ref(&suite),
         &["inference.rollouts=7".into()],
         None,
@@ -57,7 +55,7 @@ fn suites_apply_their_overrides_in_order() {
     assert_eq!(b.task.name, "Corridor-v0");
 
     let seeds = [5, 6];
-    let loaded = pipeline::load_plans(&[suite], &[], Some(&seeds), &reg).unwrap();
+    let loaded = a2perf_pipeline::load_plans(&[suite], &[], Some(&seeds), &reg).unwrap();
     assert!(loaded.plans.iter().all(|p| p.seeds == seeds));
 }
 
@@ -71,7 +69,7 @@ fn config_errors_name_the_file_and_the_problem() {
         "suite.ron",
         r#"(experiments: [(config: "missing.ron")])"#,
     );
-    let err = pipeline::load_plans(&[suite], &[], None, &reg)
+    let err = a2perf_pipeline::load_plans(&[suite], &[], None, &reg)
         .unwrap_err()
         .to_string();
     assert!(err.contains("missing.ron"), "{err}");
@@ -81,7 +79,7 @@ fn config_errors_name_the_file_and_the_problem() {
         "bad.ron",
         "(experiments: [(config: \"a.ron\", sett: [])])",
     );
-    let err = pipeline::load_plans(&[suite], &[], None, &reg)
+    let err = a2perf_pipeline::load_plans(&[suite], &[], None, &reg)
         .unwrap_err()
         .to_string();
     assert!(err.contains("bad.ron:1:") && err.contains("sett"), "{err}");
@@ -91,7 +89,7 @@ fn config_errors_name_the_file_and_the_problem() {
         "e.ron",
         r#"(env: (id: "Corridor-v0"), algorithm: (name: "random_search"), seeds: [0])"#,
     );
-    let err = pipeline::load_plans(
+    let err = a2perf_pipeline::load_plans(
         std::slice::from_ref(&exp),
         &["algorithm.noize=1.0".into()],
         None,
@@ -102,13 +100,13 @@ fn config_errors_name_the_file_and_the_problem() {
     assert!(err.contains("noize") && err.contains("noise"), "{err}");
 
     // Two experiments writing the same run directories.
-    let err = pipeline::load_plans(&[exp.clone(), exp], &[], None, &reg)
+    let err = a2perf_pipeline::load_plans(&[exp.clone(), exp], &[], None, &reg)
         .unwrap_err()
         .to_string();
     assert!(err.contains("different `name`s"), "{err}");
 
     let base = write(d, "base.ron", "(seeds: [0])");
-    let err = pipeline::load_plans(&[base], &[], None, &reg)
+    let err = a2perf_pipeline::load_plans(&[base], &[], None, &reg)
         .unwrap_err()
         .to_string();
     assert!(err.contains("env"), "{err}");

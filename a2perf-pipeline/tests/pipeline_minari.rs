@@ -10,7 +10,7 @@ mod common;
 use std::path::PathBuf;
 use std::process::Command;
 
-use a2perf_cli::pipeline::{self, TrainOptions, collect::CollectOptions};
+use a2perf_pipeline::{TrainOptions, collect::CollectOptions};
 
 fn has_minari(python: &PathBuf) -> bool {
     Command::new(python)
@@ -77,15 +77,15 @@ fn collected_datasets_load_with_minari() {
     let tmp = tempfile::tempdir().unwrap();
     let reg = common::registry();
     let plan = common::plan(tmp.path(), "exp", vec![0, 1]);
-    pipeline::train(
+    a2perf_pipeline::train(
         &reg,
-        &pipeline::grid(std::slice::from_ref(&plan), None),
+        &a2perf_pipeline::grid(std::slice::from_ref(&plan), None),
         &TrainOptions::default(),
     )
     .unwrap();
     let out = tmp.path().join("datasets");
     let runs = [plan.run_dir(0), plan.run_dir(1)];
-    let summary = pipeline::collect::collect(
+    let summary = a2perf_pipeline::collect::collect(
         &reg,
         &runs,
         &out,

@@ -6,8 +6,8 @@ mod common;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use a2perf_cli::pipeline::{self, CancelToken, RunOutcome, TrainOptions};
 use a2perf_core::LearningCurve;
+use a2perf_pipeline::{CancelToken, RunOutcome, TrainOptions};
 
 fn curve(dir: &std::path::Path) -> Vec<(u64, f64)> {
     let c: LearningCurve =
@@ -20,9 +20,9 @@ fn interrupted_sweep_resumes_to_the_uninterrupted_result() {
     let reg = common::registry();
     let clean_dir = tempfile::tempdir().unwrap();
     let clean = common::plan(clean_dir.path(), "exp", vec![0, 1, 2]);
-    let s = pipeline::train(
+    let s = a2perf_pipeline::train(
         &reg,
-        &pipeline::grid(std::slice::from_ref(&clean), None),
+        &a2perf_pipeline::grid(std::slice::from_ref(&clean), None),
         &TrainOptions::default(),
     )
     .unwrap();
@@ -46,8 +46,8 @@ fn interrupted_sweep_resumes_to_the_uninterrupted_result() {
         }),
         show_progress: false,
     };
-    let jobs = pipeline::grid(std::slice::from_ref(&plan), None);
-    let s = pipeline::train(&reg, &jobs, &opts).unwrap();
+    let jobs = a2perf_pipeline::grid(std::slice::from_ref(&plan), None);
+    let s = a2perf_pipeline::train(&reg, &jobs, &opts).unwrap();
     assert_eq!(
         s.runs.iter().map(|(_, o)| o.clone()).collect::<Vec<_>>(),
         vec![
@@ -66,7 +66,7 @@ fn interrupted_sweep_resumes_to_the_uninterrupted_result() {
     // A stale file in the interrupted run must not survive the redo.
     std::fs::write(plan.run_dir(1).join("checkpoints_stale.txt"), b"x").unwrap();
 
-    let s = pipeline::train(&reg, &jobs, &TrainOptions::default()).unwrap();
+    let s = a2perf_pipeline::train(&reg, &jobs, &TrainOptions::default()).unwrap();
     assert_eq!(
         s.runs.iter().map(|(_, o)| o.clone()).collect::<Vec<_>>(),
         vec![
@@ -102,7 +102,7 @@ fn interrupted_sweep_resumes_to_the_uninterrupted_result() {
     }
 
     // A third invocation does nothing.
-    let s = pipeline::train(&reg, &jobs, &TrainOptions::default()).unwrap();
+    let s = a2perf_pipeline::train(&reg, &jobs, &TrainOptions::default()).unwrap();
     assert_eq!(s.with(&RunOutcome::Skipped).len(), 3);
 }
 
@@ -112,20 +112,20 @@ fn shards_cover_the_grid_and_parallel_runs_match_sequential_ones() {
     let tmp = tempfile::tempdir().unwrap();
     let plan = common::plan(tmp.path(), "exp", vec![0, 1, 2, 3]);
     for i in 0..2 {
-        let shard = pipeline::Shard::new(i, 2).unwrap();
-        let jobs = pipeline::grid(std::slice::from_ref(&plan), Some(shard));
+        let shard = a2perf_pipeline::Shard::new(i, 2).unwrap();
+        let jobs = a2perf_pipeline::grid(std::slice::from_ref(&plan), Some(shard));
         assert_eq!(jobs.len(), 2);
         let opts = TrainOptions {
             jobs: 2,
             ..Default::default()
         };
-        pipeline::train(&reg, &jobs, &opts).unwrap();
+        a2perf_pipeline::train(&reg, &jobs, &opts).unwrap();
     }
     let seq = tempfile::tempdir().unwrap();
     let seq_plan = common::plan(seq.path(), "exp", vec![0, 1, 2, 3]);
-    pipeline::train(
+    a2perf_pipeline::train(
         &reg,
-        &pipeline::grid(std::slice::from_ref(&seq_plan), None),
+        &a2perf_pipeline::grid(std::slice::from_ref(&seq_plan), None),
         &TrainOptions::default(),
     )
     .unwrap();

@@ -2,16 +2,14 @@
 
 mod common;
 
-use std::process::Command;
-
-use a2perf_cli::pipeline::{self, InferOptions, TrainOptions, report::ReportOptions};
+use a2perf_pipeline::{InferOptions, TrainOptions, report::ReportOptions};
 
 fn trained() -> (tempfile::TempDir, std::path::PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
     let plan = common::plan(tmp.path(), "exp", vec![0]);
-    pipeline::train(
+    a2perf_pipeline::train(
         &common::registry(),
-        &pipeline::grid(std::slice::from_ref(&plan), None),
+        &a2perf_pipeline::grid(std::slice::from_ref(&plan), None),
         &TrainOptions::default(),
     )
     .unwrap();
@@ -27,7 +25,7 @@ fn corrupt_checkpoint_is_an_error_naming_the_file() {
     let last = bytes.len() - 1;
     bytes[last] ^= 0xff;
     std::fs::write(&ckpt, &bytes).unwrap();
-    let err = pipeline::infer_run(&reg, &run, &InferOptions::default())
+    let err = a2perf_pipeline::infer_run(&reg, &run, &InferOptions::default())
         .unwrap_err()
         .to_string();
     assert!(
@@ -35,7 +33,7 @@ fn corrupt_checkpoint_is_an_error_naming_the_file() {
         "{err}"
     );
     std::fs::write(&ckpt, b"garbage").unwrap();
-    let err = pipeline::generalize_run(&reg, &run, Some(1), false).unwrap();
+    let err = a2perf_pipeline::generalize_run(&reg, &run, Some(1), false).unwrap();
     assert!(err.sum_of_mean_returns.is_none());
     assert!(
         err.tasks
@@ -43,7 +41,7 @@ fn corrupt_checkpoint_is_an_error_naming_the_file() {
             .all(|t| t.error.as_deref().unwrap().contains("policy.ckpt"))
     );
     std::fs::remove_file(&ckpt).unwrap();
-    let err = pipeline::infer_run(&reg, &run, &InferOptions::default())
+    let err = a2perf_pipeline::infer_run(&reg, &run, &InferOptions::default())
         .unwrap_err()
         .to_string();
     assert!(err.contains("policy.ckpt"), "{err}");
@@ -54,11 +52,11 @@ fn corrupt_run_directory_is_an_error_naming_the_file() {
     let (tmp, run) = trained();
     let reg = common::registry();
     std::fs::write(run.join("run.json"), b"{\"format_version\": 1,").unwrap();
-    let err = pipeline::infer_run(&reg, &run, &InferOptions::default())
+    let err = a2perf_pipeline::infer_run(&reg, &run, &InferOptions::default())
         .unwrap_err()
         .to_string();
     assert!(err.contains("run.json"), "{err}");
-    let err = pipeline::report::write_report(
+    let err = a2perf_pipeline::report::write_report(
         &[tmp.path().to_path_buf()],
         &tmp.path().join("r"),
         &ReportOptions::default(),
@@ -70,9 +68,9 @@ fn corrupt_run_directory_is_an_error_naming_the_file() {
     let (tmp, run) = trained();
     std::fs::write(run.join("status.json"), b"[").unwrap();
     let plan = common::plan(tmp.path(), "exp", vec![0]);
-    let err = pipeline::train(
+    let err = a2perf_pipeline::train(
         &reg,
-        &pipeline::grid(&[plan], None),
+        &a2perf_pipeline::grid(&[plan], None),
         &TrainOptions::default(),
     )
     .unwrap_err()
@@ -81,7 +79,7 @@ fn corrupt_run_directory_is_an_error_naming_the_file() {
 
     let (_tmp, run) = trained();
     std::fs::write(run.join("curve.json"), b"{}").unwrap();
-    let err = pipeline::report::write_report(
+    let err = a2perf_pipeline::report::write_report(
         std::slice::from_ref(&run),
         &run.join("r"),
         &ReportOptions::default(),
@@ -91,7 +89,7 @@ fn corrupt_run_directory_is_an_error_naming_the_file() {
     assert!(err.contains("curve.json"), "{err}");
 
     let nothing = tempfile::tempdir().unwrap();
-    let err = pipeline::infer_run(&reg, nothing.path(), &InferOptions::default())
+    let err = a2perf_pipeline::infer_run(&reg, nothing.path(), &InferOptions::default())
         .unwrap_err()
         .to_string();
     assert!(err.contains("not a run directory"), "{err}");
@@ -103,9 +101,9 @@ fn a_directory_that_is_not_a_run_is_never_overwritten() {
     let plan = common::plan(tmp.path(), "exp", vec![0]);
     std::fs::create_dir_all(plan.run_dir(0)).unwrap();
     std::fs::write(plan.run_dir(0).join("precious.txt"), b"keep").unwrap();
-    let err = pipeline::train(
+    let err = a2perf_pipeline::train(
         &common::registry(),
-        &pipeline::grid(std::slice::from_ref(&plan), None),
+        &a2perf_pipeline::grid(std::slice::from_ref(&plan), None),
         &TrainOptions::default(),
     )
     .unwrap_err()
@@ -122,9 +120,9 @@ fn unwritable_output_directory_is_an_error() {
     let file = tmp.path().join("a-file");
     std::fs::write(&file, b"").unwrap();
     let plan = common::plan(&file.join("out"), "exp", vec![0]);
-    let err = pipeline::train(
+    let err = a2perf_pipeline::train(
         &common::registry(),
-        &pipeline::grid(&[plan], None),
+        &a2perf_pipeline::grid(&[plan], None),
         &TrainOptions::default(),
     )
     .unwrap_err()
@@ -132,10 +130,13 @@ fn unwritable_output_directory_is_an_error() {
     assert!(err.contains("a-file"), "{err}");
 
     let (_t, run) = trained();
-    let err =
-        pipeline::report::write_report(&[run], &file.join("report"), &ReportOptions::default())
-            .unwrap_err()
-            .to_string();
+    let err = a2perf_pipeline::report::write_report(
+        &[run],
+        &file.join("report"),
+        &ReportOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("a-file"), "{err}");
 }
 
@@ -144,68 +145,13 @@ fn unknown_environment_or_algorithm_fails_before_any_run() {
     let tmp = tempfile::tempdir().unwrap();
     let mut plan = common::plan(tmp.path(), "exp", vec![0]);
     plan.algorithm.name = "random_serch".into();
-    let err = pipeline::train(
+    let err = a2perf_pipeline::train(
         &common::registry(),
-        &pipeline::grid(&[plan], None),
+        &a2perf_pipeline::grid(&[plan], None),
         &TrainOptions::default(),
     )
     .unwrap_err()
     .to_string();
     assert!(err.contains("did you mean `random_search`"), "{err}");
     assert!(!tmp.path().join("exp").exists());
-}
-
-#[test]
-fn missing_config_file_is_an_error_from_the_binary() {
-    let tmp = tempfile::tempdir().unwrap();
-    let missing = tmp.path().join("no-such-config.ron");
-    for sub in ["train", "run"] {
-        let out = Command::new(env!("CARGO_BIN_EXE_a2perf"))
-            .arg(sub)
-            .arg(&missing)
-            .output()
-            .unwrap();
-        assert_eq!(out.status.code(), Some(1), "{sub}");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            err.contains("no-such-config.ron") && !err.contains("panicked"),
-            "{err}"
-        );
-    }
-    let out = Command::new(env!("CARGO_BIN_EXE_a2perf"))
-        .args(["train", "x.ron", "--shard", "3/2"])
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(1));
-    let out = Command::new(env!("CARGO_BIN_EXE_a2perf"))
-        .args(["infer"])
-        .arg(tmp.path())
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("no run directories"));
-}
-
-#[test]
-fn a_cause_is_printed_once() {
-    // The registry's error already includes its cause; the binary must not print it again.
-    let out = Command::new(env!("CARGO_BIN_EXE_a2perf"))
-        .args([
-            "bench",
-            "WebNavigation-Difficulty-01-v0",
-            "--steps",
-            "1",
-            "--set",
-            "num_websites=-1",
-        ])
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(1));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(
-        err.matches("expected non-negative integer").count(),
-        1,
-        "{err}"
-    );
-    assert!(err.contains("num_websites"), "{err}");
 }

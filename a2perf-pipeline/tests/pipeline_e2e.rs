@@ -3,7 +3,7 @@
 
 mod common;
 
-use a2perf_cli::pipeline::{
+use a2perf_pipeline::{
     self, InferOptions, RunOutcome, TrainOptions,
     collect::{CollectOptions, CostRule},
     report::{Category, ReportOptions},
@@ -19,9 +19,9 @@ fn train_infer_generalize_collect_report() {
         meters: common::test_meters(),
         ..Default::default()
     };
-    let summary = pipeline::train(
+    let summary = a2perf_pipeline::train(
         &reg,
-        &pipeline::grid(std::slice::from_ref(&online), None),
+        &a2perf_pipeline::grid(std::slice::from_ref(&online), None),
         &opts,
     )
     .unwrap();
@@ -38,12 +38,12 @@ fn train_infer_generalize_collect_report() {
         ] {
             assert!(dir.join(f).is_file(), "{} missing", f);
         }
-        let ckpts = pipeline::collect::checkpoints(&dir).unwrap();
+        let ckpts = a2perf_pipeline::collect::checkpoints(&dir).unwrap();
         assert!(
             ckpts.len() >= 4,
             "interval checkpoints plus the final one: {ckpts:?}"
         );
-        let inf = pipeline::infer_run(
+        let inf = a2perf_pipeline::infer_run(
             &reg,
             &dir,
             &InferOptions {
@@ -55,7 +55,7 @@ fn train_infer_generalize_collect_report() {
         .unwrap();
         assert_eq!(inf.rollout_returns.len(), 10);
         assert!(inf.inference_time_ms.count > 0 && inf.inference_time_ms.mean > 0.0);
-        let gr = pipeline::generalize_run(&reg, &dir, Some(4), false).unwrap();
+        let gr = a2perf_pipeline::generalize_run(&reg, &dir, Some(4), false).unwrap();
         assert_eq!(gr.tasks.len(), 3);
         let sum: f64 = gr.tasks.iter().map(|t| t.mean_return.unwrap()).sum();
         assert!((gr.sum_of_mean_returns.unwrap() - sum).abs() < 1e-12);
@@ -63,7 +63,7 @@ fn train_infer_generalize_collect_report() {
 
     // Offline data from the online runs' checkpoints, with its training sample cost.
     let runs: Vec<_> = (0..3).map(|s| online.run_dir(s)).collect();
-    let collected = pipeline::collect::collect(
+    let collected = a2perf_pipeline::collect::collect(
         &reg,
         &runs,
         &tmp.path().join("datasets"),
@@ -78,7 +78,7 @@ fn train_infer_generalize_collect_report() {
     .unwrap();
     let n_ckpts: usize = runs
         .iter()
-        .map(|r| pipeline::collect::checkpoints(r).unwrap().len())
+        .map(|r| a2perf_pipeline::collect::checkpoints(r).unwrap().len())
         .sum();
     assert_eq!(collected.evaluations.len(), n_ckpts);
     let data = collected
@@ -95,22 +95,22 @@ fn train_infer_generalize_collect_report() {
         "dataset".into(),
         a2perf_core::Value::Str(samples.display().to_string()),
     );
-    let info = pipeline::collect::dataset_info_for(&samples)
+    let info = a2perf_pipeline::collect::dataset_info_for(&samples)
         .unwrap()
         .unwrap();
-    offline.dataset = Some(pipeline::DatasetProvenance::from_info(
+    offline.dataset = Some(a2perf_pipeline::DatasetProvenance::from_info(
         &info,
         &samples.display().to_string(),
     ));
-    pipeline::train(
+    a2perf_pipeline::train(
         &reg,
-        &pipeline::grid(std::slice::from_ref(&offline), None),
+        &a2perf_pipeline::grid(std::slice::from_ref(&offline), None),
         &opts,
     )
     .unwrap();
     for seed in 0..3 {
         let dir = offline.run_dir(seed);
-        pipeline::infer_run(
+        a2perf_pipeline::infer_run(
             &reg,
             &dir,
             &InferOptions {
@@ -120,11 +120,11 @@ fn train_infer_generalize_collect_report() {
             },
         )
         .unwrap();
-        pipeline::generalize_run(&reg, &dir, Some(2), false).unwrap();
+        a2perf_pipeline::generalize_run(&reg, &dir, Some(2), false).unwrap();
     }
 
     let out = tmp.path().join("report");
-    let report = pipeline::report::write_report(
+    let report = a2perf_pipeline::report::write_report(
         &[tmp.path().join("online"), tmp.path().join("offline")],
         &out,
         &ReportOptions {
@@ -245,17 +245,17 @@ fn real_system_meters_record_energy_ram_and_an_emissions_csv() {
     let mut plan = common::plan(tmp.path(), "metered", vec![0]);
     plan.metrics.ram_sample_interval_s = 0.05;
     let opts = TrainOptions {
-        meters: pipeline::meters::system_meters(),
+        meters: a2perf_pipeline::meters::system_meters(),
         ..Default::default()
     };
-    pipeline::train(
+    a2perf_pipeline::train(
         &reg,
-        &pipeline::grid(std::slice::from_ref(&plan), None),
+        &a2perf_pipeline::grid(std::slice::from_ref(&plan), None),
         &opts,
     )
     .unwrap();
     let dir = plan.run_dir(0);
-    let sys: pipeline::train::PhaseSystem =
+    let sys: a2perf_pipeline::train::PhaseSystem =
         serde_json::from_slice(&std::fs::read(dir.join("train_system.json")).unwrap()).unwrap();
     assert!(sys.meter_errors.is_empty(), "{:?}", sys.meter_errors);
     assert!(sys.meters.value("energy_kwh").is_some_and(|e| e >= 0.0));
@@ -276,13 +276,13 @@ fn two_experiments_of_one_algorithm_on_one_task_stay_apart() {
     b.algorithm
         .params
         .insert("noise".into(), a2perf_core::Value::Float(0.1));
-    pipeline::train(
+    a2perf_pipeline::train(
         &reg,
-        &pipeline::grid(&[a, b], None),
+        &a2perf_pipeline::grid(&[a, b], None),
         &TrainOptions::default(),
     )
     .unwrap();
-    let report = pipeline::report::write_report(
+    let report = a2perf_pipeline::report::write_report(
         &[tmp.path().to_path_buf()],
         &tmp.path().join("report"),
         &ReportOptions {

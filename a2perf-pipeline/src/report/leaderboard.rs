@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use super::{Group, Report};
-use crate::pipeline::{RunRecord, SystemInfo};
+use crate::{RunRecord, SystemInfo};
 
 /// One (task, algorithm) entry.
 #[derive(Debug, Serialize)]

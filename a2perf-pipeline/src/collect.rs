@@ -70,7 +70,7 @@ impl Level {
 /// paper's wording): novice < μ−σ, intermediate within μ±σ, expert > μ+σ.
 ///
 /// ```
-/// use a2perf_cli::pipeline::collect::{level_of, Level};
+/// use a2perf_pipeline::collect::{level_of, Level};
 /// assert_eq!(level_of(0.0, 5.0, 2.0, false), Some(Level::Novice));
 /// assert_eq!(level_of(2.0, 5.0, 2.0, false), None);
 /// assert_eq!(level_of(2.0, 5.0, 2.0, true), Some(Level::Novice));

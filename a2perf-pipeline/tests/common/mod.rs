@@ -8,14 +8,12 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
-use a2perf_cli::pipeline::{
-    AlgorithmSpec, ExperimentPlan, TaskSpec, train::MeterFactory, train::Phase,
-};
 use a2perf_core::{
     ActMode, Action, Algorithm, AlgorithmEntry, Checkpoint, Measurement, Meter, MeterError,
     MeterReport, Observation, ParamKind, ParamSpec, Params, Policy, PolicyError, Registry,
     RunError, TrainingContext, TrainingSettings, Value,
 };
+use a2perf_pipeline::{AlgorithmSpec, ExperimentPlan, TaskSpec, train::MeterFactory, train::Phase};
 
 /// The example crate's environment and algorithm plus `toy_bc`.
 pub fn registry() -> Registry {

@@ -35,7 +35,7 @@ impl SystemInfo {
     /// Inspects the current machine.
     ///
     /// ```
-    /// let info = a2perf_cli::pipeline::SystemInfo::current();
+    /// let info = a2perf_pipeline::SystemInfo::current();
     /// assert!(info.logical_cpus >= 1);
     /// assert!(info.rustc_version.starts_with("rustc") || info.rustc_version == "unknown");
     /// ```

@@ -1,0 +1,176 @@
+//! `a2perf run`: train → infer → generalize → report in one call, resumable phase by phase.
+
+use std::path::{Path, PathBuf};
+
+use a2perf_core::{CancelToken, Registry};
+
+use crate::report::{Report, ReportOptions};
+use crate::train::{MeterFactory, TrainOptions, TrainSummary, no_meters};
+use crate::{
+    ExperimentPlan, GENERALIZATION_FILE, GeneralizationResults, INFERENCE_FILE, InferOptions,
+    InferenceResults, LoadedRun, MetricSettings, PipelineError, Result,
+};
+
+/// Options of [`run_experiments`].
+#[derive(Clone)]
+pub struct RunOptions {
+    /// Runs trained at the same time (0 = one per logical CPU).
+    pub jobs: usize,
+    /// Stops the chain at the next run boundary (training runs stop at their next progress call).
+    pub cancel: CancelToken,
+    /// System meters for training and inference.
+    pub meters: MeterFactory,
+    /// Show progress bars.
+    pub show_progress: bool,
+    /// Report directory (default: `report/` in the first experiment directory).
+    pub report_dir: Option<PathBuf>,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        Self {
+            jobs: 1,
+            cancel: CancelToken::new(),
+            meters: no_meters(),
+            show_progress: false,
+            report_dir: None,
+        }
+    }
+}
+
+/// What [`run_experiments`] has just done, for a front end to print.
+#[derive(Debug)]
+pub enum RunEvent<'a> {
+    /// A phase starts (`train`, `infer`, `generalize`, `report`).
+    Phase(&'static str),
+    /// Training of every run finished (or was skipped because complete).
+    Trained(&'a TrainSummary),
+    /// One run was inferred.
+    Inferred(&'a Path, &'a InferenceResults),
+    /// One run was generalized.
+    Generalized(&'a Path, &'a GeneralizationResults),
+    /// The report was written to the directory.
+    Reported(&'a Path, &'a Report),
+}
+
+/// Every run directory at or below each of `dirs`; a directory without any is an error naming it.
+pub fn expand_runs(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for d in dirs {
+        let found = crate::find_runs(d)?;
+        if found.is_empty() {
+            return Err(PipelineError::Invalid(format!(
+                "{}: no run directories (no run.json) found",
+                d.display()
+            )));
+        }
+        out.extend(found);
+    }
+    Ok(out)
+}
+
+/// The bootstrap repetitions recorded by the first run below `dirs` (the config's
+/// `metrics.bootstrap_reps`), else the default.
+pub fn recorded_bootstrap_reps(dirs: &[PathBuf]) -> Result<usize> {
+    for d in dirs {
+        if let Some(run) = crate::find_runs(d)?.first() {
+            return Ok(LoadedRun::open(run)?.record.metrics.bootstrap_reps);
+        }
+    }
+    Ok(MetricSettings::default().bootstrap_reps)
+}
+
+/// Turns a training summary into an error when runs were cancelled or failed.
+pub fn check_trained(summary: &TrainSummary, cancel: &CancelToken) -> Result<()> {
+    if cancel.is_cancelled() {
+        return Err(PipelineError::Cancelled);
+    }
+    let failures = summary.failures();
+    if !failures.is_empty() {
+        let list: Vec<String> = failures
+            .iter()
+            .map(|(dir, why)| format!("{}: {why}", dir.display()))
+            .collect();
+        return Err(PipelineError::Invalid(format!(
+            "{} run(s) failed: {}",
+            failures.len(),
+            list.join("; ")
+        )));
+    }
+    Ok(())
+}
+
+/// Trains every run of `plans`, then infers and generalizes each (skipping runs whose
+/// `inference.json` / `generalization.json` already exist: a retrained run starts from an empty
+/// directory, so its old results cannot linger), then writes the report. Returns the report
+/// directory.
+pub fn run_experiments(
+    registry: &Registry,
+    plans: &[ExperimentPlan],
+    opts: &RunOptions,
+    on_event: &mut dyn FnMut(RunEvent<'_>),
+) -> Result<PathBuf> {
+    if plans.is_empty() {
+        return Err(PipelineError::Invalid("no experiments to run".into()));
+    }
+    let cancel = &opts.cancel;
+    on_event(RunEvent::Phase("train"));
+    let train_opts = TrainOptions {
+        jobs: opts.jobs,
+        cancel: cancel.clone(),
+        meters: opts.meters.clone(),
+        show_progress: opts.show_progress,
+    };
+    let summary = crate::train(registry, &crate::grid(plans, None), &train_opts)?;
+    on_event(RunEvent::Trained(&summary));
+    check_trained(&summary, cancel)?;
+
+    let mut experiments: Vec<PathBuf> = plans.iter().map(ExperimentPlan::experiment_dir).collect();
+    experiments.dedup();
+    let runs: Vec<PathBuf> = plans
+        .iter()
+        .flat_map(|p| p.seeds.iter().map(|s| p.run_dir(*s)))
+        .collect();
+
+    on_event(RunEvent::Phase("infer"));
+    let infer_opts = InferOptions {
+        meters: opts.meters.clone(),
+        show_progress: opts.show_progress,
+        ..Default::default()
+    };
+    for dir in &runs {
+        if cancel.is_cancelled() {
+            return Err(PipelineError::Cancelled);
+        }
+        if dir.join(INFERENCE_FILE).is_file() {
+            continue;
+        }
+        let r = crate::infer_run(registry, dir, &infer_opts)?;
+        on_event(RunEvent::Inferred(dir, &r));
+    }
+
+    on_event(RunEvent::Phase("generalize"));
+    for dir in &runs {
+        if cancel.is_cancelled() {
+            return Err(PipelineError::Cancelled);
+        }
+        if dir.join(GENERALIZATION_FILE).is_file() {
+            continue;
+        }
+        let r = crate::generalize_run(registry, dir, None, opts.show_progress)?;
+        on_event(RunEvent::Generalized(dir, &r));
+    }
+
+    on_event(RunEvent::Phase("report"));
+    let out = opts
+        .report_dir
+        .clone()
+        .unwrap_or_else(|| experiments[0].join("report"));
+    let report_opts = ReportOptions {
+        bootstrap_reps: recorded_bootstrap_reps(&experiments)?,
+        seed: 0,
+    };
+    let report = crate::report::write_report(&experiments, &out, &report_opts)?;
+    on_event(RunEvent::Reported(&out, &report));
+    Ok(out)
+}
