@@ -76,6 +76,12 @@ fn common_params() -> Vec<ParamSpec> {
             Value::Int(1),
             "rapier solver iterations per 1 ms step (2: ~6x tighter joints, ~35% slower)",
         ),
+        ParamSpec::new(
+            "time_limit_terminates",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "report the episode-length limit as terminated (A2Perf: its gymnasium compatibility layer turns motion_imitation's time limit into terminated=True) instead of truncated",
+        ),
     ]
 }
 
@@ -145,6 +151,9 @@ pub fn config_from_params(
         return Err(bad("solver_iterations", "must be in 1..=50"));
     }
     c.solver_iterations = it;
+    c.time_limit_terminates = p
+        .bool("time_limit_terminates")
+        .map_err(|e| bad("time_limit_terminates", e))?;
     Ok(c)
 }
 
