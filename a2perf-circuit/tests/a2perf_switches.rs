@@ -132,7 +132,10 @@ fn infeasible_minus_one_with_a2perf_auto_reset_semantics() {
     }
     let step = env.step(&Action::Discrete(*last)).unwrap();
     assert_eq!(step.reward, -1.0);
-    assert!(step.terminated && step.truncated, "A2Perf returns True, True");
+    assert!(
+        step.terminated && step.truncated,
+        "A2Perf returns True, True"
+    );
     assert!(infeasible(&step.info));
     for k in ["wirelength", "congestion", "density"] {
         assert_eq!(step.info.get(k), Some(-1.0), "{k}");
@@ -233,7 +236,9 @@ fn golden_replay(
         let xy = &positions[&node.to_string()];
         let (x, y) = (xy[0].as_f64().unwrap(), xy[1].as_f64().unwrap());
         let (c, r) = ((x / gw) as usize, (y / gh) as usize);
-        assert!(((c as f64 + 0.5) * gw - x).abs() < 1e-6 && ((r as f64 + 0.5) * gh - y).abs() < 1e-6);
+        assert!(
+            ((c as f64 + 0.5) * gw - x).abs() < 1e-6 && ((r as f64 + 0.5) * gh - y).abs() < 1e-6
+        );
         r * cols + c
     };
     let mut obs = env.reset(Some(0)).unwrap();
@@ -389,7 +394,11 @@ fn initial_locations_come_from_the_mixed_size_placer_unless_switched() {
     let mut fd = PlacementCost::new(&g.netlist, g.settings.clone()).unwrap();
     fd.apply_placement(&g.placement).unwrap();
     let plc = fd.clone();
-    place_std_cells(&mut fd, &FdSchedule::mixed_size(), &mut FdScratch::default());
+    place_std_cells(
+        &mut fd,
+        &FdSchedule::mixed_size(),
+        &mut FdScratch::default(),
+    );
     let macros: Vec<usize> = (0..fd.num_nodes())
         .filter(|&i| matches!(fd.kind(i), NodeKind::HardMacro | NodeKind::SoftMacro))
         .collect();
@@ -418,7 +427,10 @@ fn initial_locations_come_from_the_mixed_size_placer_unless_switched() {
         assert!(fx - w / 2.0 >= 0.0 && fx + w / 2.0 <= g.settings.canvas_width);
         assert!(fy - h / 2.0 >= 0.0 && fy + h / 2.0 <= g.settings.canvas_height);
     }
-    assert_eq!(hard_moved, 12, "the mixed-size run moves the hard macros too");
+    assert_eq!(
+        hard_moved, 12,
+        "the mixed-size run moves the hard macros too"
+    );
     // Only the observation changes: the end-of-episode placer starts from the canvas centre
     // (CT's use_current_loc=False), so the same actions give the same masks and reward.
     let (ea, eo) = (
@@ -431,7 +443,10 @@ fn initial_locations_come_from_the_mixed_size_placer_unless_switched() {
         assert_eq!(sa.reward, so.reward);
     }
     // Deterministic.
-    let again = reg.make_env(SMALL, &BTreeMap::new()).unwrap().reset(Some(5));
+    let again = reg
+        .make_env(SMALL, &BTreeMap::new())
+        .unwrap()
+        .reset(Some(5));
     assert_eq!(again.unwrap(), oa);
 }
 
@@ -464,9 +479,14 @@ node { name: "B/p" input: "P2" attr { key: "type" value { placeholder: "MACRO_PI
     settings.canvas_width = 100.0;
     settings.canvas_height = 100.0;
     let mut cost = PlacementCost::new(&netlist, settings).unwrap();
-    place_std_cells(&mut cost, &FdSchedule::mixed_size(), &mut FdScratch::default());
+    place_std_cells(
+        &mut cost,
+        &FdSchedule::mixed_size(),
+        &mut FdScratch::default(),
+    );
     let (a, b) = (cost.position(2), cost.position(4));
-    let near = |(x, y): (f64, f64), (ex, ey): (f64, f64)| (x - ex).abs() < 3.0 && (y - ey).abs() < 3.0;
+    let near =
+        |(x, y): (f64, f64), (ex, ey): (f64, f64)| (x - ex).abs() < 3.0 && (y - ey).abs() < 3.0;
     assert!(near(a, (20.0, 20.0)), "A at {a:?}");
     assert!(near(b, (40.0, 80.0)), "B at {b:?}");
     // The end-of-episode schedule leaves hard macros where they are.
@@ -578,8 +598,8 @@ node { name: "P" attr { key: "type" value { placeholder: "PORT" } }
         (100.0, 80.0, 8, 5)
     );
     // The placement's header comes after the netlist's and wins.
-    let plc = Placement::parse("# Columns : 10  Rows : 10\n# Width : 120.0  Height : 90.0\n")
-        .unwrap();
+    let plc =
+        Placement::parse("# Columns : 10  Rows : 10\n# Width : 120.0  Height : 90.0\n").unwrap();
     let s = CostSettings::ct_env(&netlist, Some(&plc.header));
     assert_eq!(
         (s.canvas_width, s.canvas_height, s.grid_cols, s.grid_rows),

@@ -90,7 +90,8 @@ pub struct EnvConfig {
     pub mode: Mode,
     /// Episode length in test mode (and the curriculum's final length).
     pub episode_steps: usize,
-    /// Curriculum horizon in non-terminal steps (train mode): `T = (1−s³)·20 + s³·episode_steps`.
+    /// Curriculum horizon in steps that do not end an episode (train mode):
+    /// `T = (1−s³)·20 + s³·episode_steps`.
     pub curriculum_steps: f64,
     /// Probability of starting at a random phase (otherwise a warm-up episode).
     pub ref_state_init_prob: f64,

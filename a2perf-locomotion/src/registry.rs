@@ -50,7 +50,7 @@ fn common_params() -> Vec<ParamSpec> {
             "curriculum_steps",
             ParamKind::Float,
             Value::Float(30e6),
-            "train mode: non-terminal steps until episodes reach full length",
+            "train mode: steps that do not end an episode until episodes reach full length",
         ),
         ParamSpec::new(
             "randomize",

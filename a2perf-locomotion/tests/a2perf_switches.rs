@@ -39,8 +39,14 @@ fn time_limit_is_truncation_unless_a2perfs_termination_is_asked_for() {
     let (n_ours, end_ours) = run_to_end(&mut ours);
     let (n_a2perf, end_a2perf) = run_to_end(&mut a2perf);
     assert_eq!((n_ours, n_a2perf), (7, 7));
-    assert!(end_ours.truncated && !end_ours.terminated, "Gymnasium: truncated");
-    assert!(end_a2perf.terminated && !end_a2perf.truncated, "A2Perf: terminated");
+    assert!(
+        end_ours.truncated && !end_ours.terminated,
+        "Gymnasium: truncated"
+    );
+    assert!(
+        end_a2perf.terminated && !end_a2perf.truncated,
+        "A2Perf: terminated"
+    );
     assert_eq!(end_ours.reward, end_a2perf.reward);
     assert_eq!(end_ours.observation, end_a2perf.observation);
     assert_eq!(ours.last_termination(), None);

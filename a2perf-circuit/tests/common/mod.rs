@@ -74,10 +74,7 @@ pub fn find_infeasible_episode(env: &mut dyn Env) -> (u64, Vec<usize>) {
 /// Synthetic-Small on a coarser 12×12 grid (instead of 16×16): fewer legal cells, so some random
 /// placements strand a macro.
 pub fn coarse_small(reg: &Registry, extra: &[(&str, Value)]) -> Box<dyn Env> {
-    let mut p = params(&[
-        ("grid_cols", Value::Int(12)),
-        ("grid_rows", Value::Int(12)),
-    ]);
+    let mut p = params(&[("grid_cols", Value::Int(12)), ("grid_rows", Value::Int(12))]);
     p.extend(params(extra));
     reg.make_env("CircuitTraining-Synthetic-Small-v0", &p)
         .unwrap()
