@@ -274,10 +274,6 @@ impl CircuitEnv {
         if !netlist_blockages.is_empty() {
             cost.set_blockages(&netlist_blockages);
         }
-        let mut fd = FdScratch::default();
-        if config.initial_locations == InitialLocations::MixedSizeFd {
-            place_std_cells(&mut cost, &FdSchedule::mixed_size(), &mut fd);
-        }
         let (cols, rows) = cost.grid();
         if config.padded_action && (cols > PADDED_GRID || rows > PADDED_GRID) {
             return Err(bad_param(
@@ -486,6 +482,10 @@ impl CircuitEnv {
             let b = (r * fm / rows) * fm + c * fm / cols;
             cell_block.push(b as u16);
             block_counts[b] += 1;
+        }
+        let mut fd = FdScratch::default();
+        if config.initial_locations == InitialLocations::MixedSizeFd {
+            place_std_cells(&mut cost, &FdSchedule::mixed_size(), &mut fd);
         }
         let base_x = (0..n).map(|i| cost.position(i).0).collect();
         let base_y = (0..n).map(|i| cost.position(i).1).collect();
@@ -888,7 +888,7 @@ fn common_params() -> Vec<ParamSpec> {
             "infeasible_auto_reset",
             ParamKind::Bool,
             Value::Bool(false),
-            "on that step return the reset observation with terminated and truncated both set and leave the env reset (A2Perf's fork: true)",
+            "when a macro is left without a legal cell, return the reset observation with terminated and truncated both set and leave the env reset (A2Perf's fork: true; false = the stranded state, terminated only)",
         ),
         ParamSpec::new(
             "initial_locations",
