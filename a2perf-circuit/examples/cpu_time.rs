@@ -84,9 +84,18 @@ fn main() {
         placed.clone_from(&cost);
         place_std_cells(&mut placed, &schedule, &mut scratch);
     });
-    for (label, fd) in [
-        ("episode, 133 macros + FD placer", true),
-        ("episode, 133 macros, no FD", false),
+    let ct_settings = CostSettings {
+        congestion_grid: Some(settings.ct_congestion_grid()),
+        ..settings.clone()
+    };
+    for (label, fd, settings) in [
+        ("episode, 133 macros + FD placer", true, &settings),
+        ("episode, 133 macros, no FD", false, &settings),
+        (
+            "episode + FD placer, A2Perf congestion grid",
+            true,
+            &ct_settings,
+        ),
     ] {
         let config = CircuitEnvConfig {
             std_cell_placement: fd,
@@ -116,4 +125,13 @@ fn main() {
             }
         });
     }
+    measure("env construction (mixed-size FD run)", 5, || {
+        let env = CircuitEnv::new(
+            &netlist,
+            Some(&placement),
+            settings.clone(),
+            CircuitEnvConfig::default(),
+        );
+        std::hint::black_box(env.is_ok());
+    });
 }

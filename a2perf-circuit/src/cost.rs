@@ -112,17 +112,45 @@ impl CostSettings {
         }
     }
 
-    /// The CT / A2Perf environment settings: canvas and grid from the `.plc` header (else the
-    /// netlist's `FP bbox`, else binary defaults), routes 70.33/74.51, allocation 51.79/51.79,
-    /// smoothing 5, square soft macros, legacy congestion grid.
+    /// The CT / A2Perf environment settings: canvas and grid from the comments at the top of the
+    /// netlist and then of the `.plc` (a later value wins, as circuit_training's
+    /// `extract_sizes_from_comments([netlist, plc])`: `FP bbox: {x0 y0} {W H}` and
+    /// `Width : W  Height : H` give the canvas, `Columns : c  Rows : r` the grid), else the binary
+    /// defaults; routes 70.33/74.51, allocation 51.79/51.79, smoothing 5, square soft macros,
+    /// legacy congestion grid.
+    ///
+    /// ```
+    /// use a2perf_circuit::{CostSettings, Netlist, SoftMacroRule};
+    /// let text = r#"# FP bbox: {0.0 0.0} {200.0 100.0}
+    /// ## Columns : 20  Rows : 10
+    /// node { name: "M" attr { key: "type" value { placeholder: "MACRO" } }
+    ///        attr { key: "width" value { f: 10 } } attr { key: "height" value { f: 10 } } }
+    /// "#;
+    /// let netlist = Netlist::parse(text, SoftMacroRule::default()).unwrap();
+    /// let s = CostSettings::ct_env(&netlist, None);
+    /// assert_eq!((s.canvas_width, s.canvas_height, s.grid_cols, s.grid_rows), (200.0, 100.0, 20, 10));
+    /// ```
     pub fn ct_env(netlist: &Netlist, header: Option<&PlcHeader>) -> Self {
         let mut s = Self::google_binary_defaults(netlist);
-        if let Some([x0, y0, x1, y1]) = netlist.fp_bbox
-            && x1 - x0 > 0.0
-            && y1 - y0 > 0.0
-        {
-            s.canvas_width = x1 - x0;
-            s.canvas_height = y1 - y0;
+        for line in &netlist.comments {
+            let line = std::slice::from_ref(line);
+            // CT's regex takes the second pair of `FP bbox` as the width and height.
+            if let Some([_, _, w, h]) = crate::netlist::parse_fp_bbox(line)
+                && w > 0.0
+                && h > 0.0
+            {
+                s.canvas_width = w;
+                s.canvas_height = h;
+            }
+            let h = crate::plc::parse_header(line);
+            if let Some((w, hh)) = h.canvas {
+                s.canvas_width = w;
+                s.canvas_height = hh;
+            }
+            if let Some((c, r)) = h.grid {
+                s.grid_cols = c;
+                s.grid_rows = r;
+            }
         }
         if let Some(h) = header {
             if let Some((w, hh)) = h.canvas {

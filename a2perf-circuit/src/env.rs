@@ -3,18 +3,31 @@
 //! # Episode
 //! One hard macro per step, in A2Perf's order (descending area, ties in descending node index;
 //! fixed macros excluded). The action is a placement-grid cell (`Discrete{cols·rows}`,
-//! `cell = row·cols + col`) or, with `padded_action`, A2Perf's padded 128×128 layout. The macro's
-//! centre goes to the cell centre. Reward is 0 until the last macro; then soft macros and standard
-//! cells are placed by our force-directed placer ([`crate::placer`]) and the reward is
-//! `−proxy_cost`. If a macro has no legal cell left the episode terminates with reward
-//! `infeasible_reward`, by default [`INFEASIBLE_REWARD`] = −4.0 (circuit_training's current
-//! value). A2Perf's fork uses −1.0, which under its own proxy weights is *better* than most
+//! `cell = row·cols + col`) or, with `padded_action`, A2Perf's padded 128×128 layout
+//! ([`cell_to_padded_action`]; the padding is always masked). The macro's centre goes to the cell
+//! centre. Reward is 0 until the last macro; then soft macros and standard cells are placed by our
+//! force-directed placer ([`crate::placer`], from the canvas centre whatever their current
+//! positions, as circuit_training's `use_current_loc=False`) and the reward is `−proxy_cost`.
+//!
+//! If a macro has no legal cell left the episode terminates with reward `infeasible_reward`, by
+//! default [`INFEASIBLE_REWARD`] = −4.0 (circuit_training's current value). A2Perf's fork uses
+//! −1.0 ([`A2PERF_INFEASIBLE_REWARD`]), which under its own proxy weights is *better* than most
 //! feasible placements (random legal placements of Ariane cost ≈ 1.40, good ones ≈ 1.15), so an
-//! agent could learn to make the placement infeasible on purpose; set `infeasible_reward = -1.0`
-//! ([`A2PERF_INFEASIBLE_REWARD`]) to reproduce the paper's environment. (A2Perf also auto-resets;
-//! we leave that to the caller.)
+//! agent could learn to make the placement infeasible on purpose. A2Perf's fork also resets
+//! itself on that step: it returns `(reset observation, −1.0, terminated = True, truncated = True,
+//! {wirelength, congestion, density: −1})`, and the environment is then at the start of a new
+//! episode (a `step` without `reset` continues it; a `reset` gives the same observation again).
+//! `infeasible_auto_reset = true` reproduces that step; by default the stranded state is returned
+//! (`truncated = false`) and `step` asks for a `reset`.
 //! Info at the end: `wirelength` (the wirelength cost), `density`, `congestion`, `proxy`,
 //! `wirelength_hpwl`, `infeasible`.
+//!
+//! # Initial locations
+//! As A2Perf's `CircuitEnv.__init__`, the constructor runs a mixed-size force-directed placement
+//! of every movable node, hard macros included ([`FdSchedule::mixed_size`]; our placer, Google's
+//! is closed). Its result is what the observation shows for a macro until the agent places it, and
+//! where soft macros and standard cells sit during the episode. `initial_locations = "plc"` keeps
+//! the positions of the `.plc` (or the generator) instead.
 //!
 //! # Observation layout
 //! Tensors, in order (`M` = macros (hard then soft… in node-index order, as `get_macro_indices`),
@@ -24,15 +37,17 @@
 //! |---|---|---|
 //! | `features` | `[134]` | `[w/W, h/H, placed fraction, legal-cell fraction, area/(W·H), unplaced hard-macro area/(W·H)]` of the current macro, then an 8×8 density map (mean cell density per block), then an 8×8 congestion map (mean of (H+V)/2 per block) |
 //! | `grid` | `[4, rows, cols]` | channel 0 cell density, 1 congestion (H+V)/2, 2 legality of the current macro (0/1), 3 wirelength hint: `1 − Δ/maxΔ` where Δ is the HPWL increase of the current macro's nets if its centre were at that cell (pins at the centre; only placed/fixed pins count) |
-//! | `locations_x`, `locations_y` | `[M]` | macro centres / (W+H) (A2Perf normalisation) |
-//! | `is_node_placed` | `[M]` | 1 for placed macros (soft macros count as placed) |
+//! | `locations_x`, `locations_y` | `[M]` | macro centres / (W+H) (A2Perf normalisation): a placed hard macro's cell centre, otherwise its initial location |
+//! | `is_node_placed` | `[M]` | 1 for placed (or fixed) hard macros; soft macros 0 unless fixed, as A2Perf (`soft_macros_placed = true`: 1, at their current location) |
 //! | `current_node` | `[1]` | position in `M` of the macro to place (0 when done) |
 //! | `node_types` | `[M]` | 1 hard, 2 soft |
 //! | `macros_w`, `macros_h` | `[M]` | size / (W+H) (0 for soft macros, as A2Perf) |
-//! | `sparse_adj_i`, `sparse_adj_j`, `sparse_adj_weight` | `[E]` | macro adjacency (positions in `M`, `i < j`), weights ÷ their mean |
+//! | `sparse_adj_i`, `sparse_adj_j`, `sparse_adj_weight` | `[E]` | macro adjacency (positions in `M`, `i < j`), weights ÷ (their mean + 10⁻⁶), as A2Perf |
 //!
 //! The mask is [`Observation::action_mask`] (`true` = legal). Unlike A2Perf, node tensors are not
-//! zero-padded to 3500 and port clusters are not included.
+//! zero-padded to 3500, port clusters are not included, and `mask`, `fake_net_heatmap` and
+//! `netlist_index` are not tensors (the README's "Differences from the original A2Perf" says
+//! why).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -47,7 +62,7 @@ use crate::cost::{CostSettings, CostWeights, PlacementCost};
 use crate::generator::{GeneratorConfig, generate};
 use crate::netlist::{Netlist, NodeKind, SoftMacroRule};
 use crate::placer::{FdSchedule, FdScratch, place_std_cells};
-use crate::plc::Placement;
+use crate::plc::{Placement, parse_header};
 
 /// Default reward when a macro has no legal cell left: circuit_training's current value, below
 /// the proxy cost of any realistic feasible placement.
@@ -62,6 +77,50 @@ pub const FEATURE_MAP: usize = 8;
 pub const FEATURE_DIM: usize = 6 + 2 * FEATURE_MAP * FEATURE_MAP;
 /// Channels of the `grid` tensor.
 pub const GRID_CHANNELS: usize = 4;
+/// Added to the mean adjacency weight before dividing by it (A2Perf's `EPSILON`).
+const ADJACENCY_EPSILON: f64 = 1e-6;
+
+/// A2Perf's placement of a `cols × rows` grid on the 128×128 action canvas: `(up, right)` =
+/// `((128 − rows)/2, (128 − cols)/2)`, the padding rows before the grid's first row and padding
+/// columns before its first column (A2Perf calls the latter `right_pad`).
+///
+/// ```
+/// // circuit_training's toy netlist (20×10) and Ariane (35×33).
+/// assert_eq!(a2perf_circuit::env::padding(20, 10), (59, 54));
+/// assert_eq!(a2perf_circuit::env::padding(35, 33), (47, 46));
+/// ```
+pub fn padding(cols: usize, rows: usize) -> (usize, usize) {
+    (
+        PADDED_GRID.saturating_sub(rows) / 2,
+        PADDED_GRID.saturating_sub(cols) / 2,
+    )
+}
+
+/// The padded action of placement-grid `cell` (A2Perf's `translate_to_padded_canvas`).
+///
+/// ```
+/// use a2perf_circuit::env::{cell_to_padded_action, padded_action_to_cell};
+/// // Toy netlist: cell 41 (row 2, col 1) is action (2 + 59)·128 + (1 + 54).
+/// assert_eq!(cell_to_padded_action(41, 20, 10), 7863);
+/// assert_eq!(padded_action_to_cell(7863, 20, 10), Some(41));
+/// assert_eq!(padded_action_to_cell(0, 20, 10), None);
+/// ```
+pub fn cell_to_padded_action(cell: usize, cols: usize, rows: usize) -> usize {
+    let (up, right) = padding(cols, rows);
+    (cell / cols + up) * PADDED_GRID + (cell % cols + right)
+}
+
+/// The placement-grid cell of a padded action, `None` when it falls in the padding or outside
+/// the 128×128 canvas.
+pub fn padded_action_to_cell(action: usize, cols: usize, rows: usize) -> Option<usize> {
+    if action >= PADDED_GRID * PADDED_GRID {
+        return None;
+    }
+    let (up, right) = padding(cols, rows);
+    let r = (action / PADDED_GRID).checked_sub(up)?;
+    let c = (action % PADDED_GRID).checked_sub(right)?;
+    (r < rows && c < cols).then_some(r * cols + c)
+}
 
 /// Hard macros to place, A2Perf order: descending area, ties in descending node index.
 pub fn placement_order(netlist: &Netlist, fixed: &[bool]) -> Vec<usize> {
@@ -83,6 +142,28 @@ pub fn placement_order(netlist: &Netlist, fixed: &[bool]) -> Vec<usize> {
     hard
 }
 
+/// Where the initial node locations come from (what the observation shows for a macro until it
+/// is placed, and where soft macros and standard cells sit during an episode).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum InitialLocations {
+    /// A mixed-size force-directed run at construction ([`FdSchedule::mixed_size`]), as A2Perf's
+    /// `CircuitEnv.__init__` (parameter value `fd`).
+    #[default]
+    MixedSizeFd,
+    /// The initial placement as given (the `.plc` file or the generator's placement; `plc`).
+    Plc,
+}
+
+impl InitialLocations {
+    /// The parameter value naming this choice.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::MixedSizeFd => "fd",
+            Self::Plc => "plc",
+        }
+    }
+}
+
 /// Options of a [`CircuitEnv`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct CircuitEnvConfig {
@@ -98,6 +179,14 @@ pub struct CircuitEnvConfig {
     pub weights: CostWeights,
     /// Reward of an episode that ends because a macro has no legal cell left.
     pub infeasible_reward: f64,
+    /// On that step, behave as A2Perf's fork: return the reset observation with `terminated`
+    /// and `truncated` both set, and leave the environment reset.
+    pub infeasible_auto_reset: bool,
+    /// Report soft macros as placed, at their current location (ours before the A2Perf review);
+    /// `false` reports them as A2Perf does: not placed (unless fixed), at their initial location.
+    pub soft_macros_placed: bool,
+    /// Where the initial node locations come from.
+    pub initial_locations: InitialLocations,
 }
 
 impl Default for CircuitEnvConfig {
@@ -109,6 +198,9 @@ impl Default for CircuitEnvConfig {
             fd_schedule: FdSchedule::default(),
             weights: CostWeights::default(),
             infeasible_reward: INFEASIBLE_REWARD,
+            infeasible_auto_reset: false,
+            soft_macros_placed: false,
+            initial_locations: InitialLocations::MixedSizeFd,
         }
     }
 }
@@ -177,6 +269,11 @@ impl CircuitEnv {
             cost.apply_placement(p)
                 .map_err(|e| bad_param("init_placement", e.to_string()))?;
         }
+        // circuit_training reads blockages from the first of [netlist, plc] that has any.
+        let netlist_blockages = parse_header(&netlist.comments).blockages;
+        if !netlist_blockages.is_empty() {
+            cost.set_blockages(&netlist_blockages);
+        }
         let (cols, rows) = cost.grid();
         if config.padded_action && (cols > PADDED_GRID || rows > PADDED_GRID) {
             return Err(bad_param(
@@ -244,7 +341,7 @@ impl CircuitEnv {
             1.0
         } else {
             adj.values().sum::<f64>() / adj.len() as f64
-        };
+        } + ADJACENCY_EPSILON;
         let e = adj.len();
         let static_tensors = vec![
             Tensor {
@@ -338,6 +435,25 @@ impl CircuitEnv {
             config.infeasible_reward.to_string(),
         );
         metadata.insert(
+            "infeasible_auto_reset".into(),
+            config.infeasible_auto_reset.to_string(),
+        );
+        metadata.insert(
+            "soft_macros_placed".into(),
+            config.soft_macros_placed.to_string(),
+        );
+        metadata.insert(
+            "initial_locations".into(),
+            config.initial_locations.name().into(),
+        );
+        metadata.insert(
+            "congestion_grid".into(),
+            match settings.congestion_grid {
+                None => "legacy".into(),
+                Some((c, r)) => format!("{c}x{r}"),
+            },
+        );
+        metadata.insert(
             "action_layout".into(),
             if config.padded_action {
                 "padded128".into()
@@ -367,6 +483,10 @@ impl CircuitEnv {
             cell_block.push(b as u16);
             block_counts[b] += 1;
         }
+        let mut fd = FdScratch::default();
+        if config.initial_locations == InitialLocations::MixedSizeFd {
+            place_std_cells(&mut cost, &FdSchedule::mixed_size(), &mut fd);
+        }
         let base_x = (0..n).map(|i| cost.position(i).0).collect();
         let base_y = (0..n).map(|i| cost.position(i).1).collect();
         Ok(Self {
@@ -381,7 +501,7 @@ impl CircuitEnv {
             macro_pos,
             current: 0,
             needs_reset: true,
-            fd: FdScratch::default(),
+            fd,
             static_tensors,
             dens: Vec::new(),
             xcost: vec![0.0; cols],
@@ -410,32 +530,33 @@ impl CircuitEnv {
     /// Converts an action to a placement-grid cell (None when it falls in the padding).
     pub fn action_to_cell(&self, a: usize) -> Option<usize> {
         let (cols, rows) = self.cost.grid();
-        if !self.config.padded_action {
-            return (a < cols * rows).then_some(a);
+        if self.config.padded_action {
+            padded_action_to_cell(a, cols, rows)
+        } else {
+            (a < cols * rows).then_some(a)
         }
-        let up = (PADDED_GRID - rows) / 2;
-        let right = (PADDED_GRID - cols) / 2;
-        let (r, c) = (a / PADDED_GRID, a % PADDED_GRID);
-        if r < up
-            || c < right
-            || r - up >= rows
-            || c - right >= cols
-            || a >= PADDED_GRID * PADDED_GRID
-        {
-            return None;
-        }
-        Some((r - up) * cols + (c - right))
     }
 
     /// Converts a placement-grid cell to an action.
     pub fn cell_to_action(&self, cell: usize) -> usize {
         let (cols, rows) = self.cost.grid();
-        if !self.config.padded_action {
-            return cell;
+        if self.config.padded_action {
+            cell_to_padded_action(cell, cols, rows)
+        } else {
+            cell
         }
-        let up = (PADDED_GRID - rows) / 2;
-        let right = (PADDED_GRID - cols) / 2;
-        (cell / cols + up) * PADDED_GRID + (cell % cols + right)
+    }
+
+    /// Puts every macro to place back at its initial location, unplaced, at the first step.
+    fn restart(&mut self) {
+        self.cost.x.copy_from_slice(&self.base_x);
+        self.cost.y.copy_from_slice(&self.base_y);
+        for &i in &self.order {
+            self.cost.placed[i] = false;
+        }
+        self.cost.recompute();
+        self.current = 0;
+        self.needs_reset = false;
     }
 
     fn write_obs(&mut self, obs: &mut Observation) {
@@ -459,9 +580,7 @@ impl CircuitEnv {
         for (cell, &legal) in self.mask.iter().enumerate() {
             if legal {
                 let a = if self.config.padded_action {
-                    let up = (PADDED_GRID - rows) / 2;
-                    let right = (PADDED_GRID - cols) / 2;
-                    (cell / cols + up) * PADDED_GRID + (cell % cols + right)
+                    cell_to_padded_action(cell, cols, rows)
                 } else {
                     cell
                 };
@@ -586,8 +705,15 @@ impl CircuitEnv {
         // Dynamic A2Perf features.
         let norm = cw + ch;
         for (k, &i) in self.macros.iter().enumerate() {
-            let (x, y) = self.cost.position(i);
-            let placed = self.cost.kind(i) == NodeKind::SoftMacro || self.cost.is_placed(i);
+            // A2Perf marks a soft macro placed only if it is fixed and never updates its location
+            // (the end-of-episode placer moves it after the last observation it would update).
+            let (placed, (x, y)) = match self.cost.kind(i) {
+                NodeKind::SoftMacro if self.config.soft_macros_placed => {
+                    (true, self.cost.position(i))
+                }
+                NodeKind::SoftMacro => (self.cost.is_fixed(i), (self.base_x[i], self.base_y[i])),
+                _ => (self.cost.is_placed(i), self.cost.position(i)),
+            };
             obs.tensors[2].data[k] = (x / norm) as f32;
             obs.tensors[3].data[k] = (y / norm) as f32;
             obs.tensors[4].data[k] = if placed { 1.0 } else { 0.0 };
@@ -647,14 +773,7 @@ impl Env for CircuitEnv {
 
     fn reset_into(&mut self, _seed: Option<u64>, obs: &mut Observation) -> Result<(), EnvError> {
         // Deterministic: the episode does not depend on the seed (the node order is fixed).
-        self.cost.x.copy_from_slice(&self.base_x);
-        self.cost.y.copy_from_slice(&self.base_y);
-        for &i in &self.order {
-            self.cost.placed[i] = false;
-        }
-        self.cost.recompute();
-        self.current = 0;
-        self.needs_reset = false;
+        self.restart();
         self.write_obs(obs);
         Ok(())
     }
@@ -710,11 +829,18 @@ impl Env for CircuitEnv {
         } else {
             out.reward = self.config.infeasible_reward;
             out.terminated = true;
-            self.needs_reset = true;
             out.info.set("infeasible", 1.0);
             out.info.set("wirelength", -1.0);
             out.info.set("density", -1.0);
             out.info.set("congestion", -1.0);
+            if self.config.infeasible_auto_reset {
+                // A2Perf's fork: `obs, _ = self.reset(); return obs, -1.0, True, True, info`.
+                out.truncated = true;
+                self.restart();
+                self.write_obs(&mut out.observation);
+            } else {
+                self.needs_reset = true;
+            }
         }
         Ok(())
     }
@@ -726,7 +852,7 @@ fn common_params() -> Vec<ParamSpec> {
             "padded_action",
             ParamKind::Bool,
             Value::Bool(false),
-            "A2Perf's padded 128x128 action layout",
+            "A2Perf's padded 128x128 action space (Discrete(16384), grid centred, padding always masked); false = one action per grid cell",
         ),
         ParamSpec::new(
             "std_cell_placer",
@@ -759,6 +885,24 @@ fn common_params() -> Vec<ParamSpec> {
             "reward when a macro has no legal cell left (A2Perf's fork: -1.0, better than most feasible placements)",
         ),
         ParamSpec::new(
+            "infeasible_auto_reset",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "when a macro is left without a legal cell, return the reset observation with terminated and truncated both set and leave the env reset (A2Perf's fork: true; false = the stranded state, terminated only)",
+        ),
+        ParamSpec::new(
+            "initial_locations",
+            ParamKind::Choice(&["fd", "plc"]),
+            Value::Str("fd".into()),
+            "initial node locations: fd = mixed-size force-directed run at construction (as A2Perf; our placer), plc = the .plc / generator placement",
+        ),
+        ParamSpec::new(
+            "soft_macros_placed",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "report soft macros as placed at their current location in is_node_placed/locations (false = as A2Perf: unplaced unless fixed, at their initial location)",
+        ),
+        ParamSpec::new(
             "smooth_range",
             ParamKind::Float,
             Value::Null,
@@ -780,7 +924,7 @@ fn common_params() -> Vec<ParamSpec> {
             "congestion_grid",
             ParamKind::Choice(&["legacy", "ct"]),
             Value::Str("legacy".into()),
-            "legacy = placement grid (verified); ct = CT's separate grid (semantics assumed)",
+            "congestion grid: legacy = the placement grid (Google's computation, verified); ct = A2Perf's separate grid of 2000/(70.33+74.51) um cells (its use by the closed binary assumed: the same routing model on that grid)",
         ),
     ]
 }
@@ -823,6 +967,12 @@ fn config_from(
         fd_schedule: FdSchedule::default(),
         weights,
         infeasible_reward: infeasible_reward(p)?,
+        infeasible_auto_reset: p.bool("infeasible_auto_reset").map_err(perr)?,
+        soft_macros_placed: p.bool("soft_macros_placed").map_err(perr)?,
+        initial_locations: match p.str("initial_locations").map_err(perr)? {
+            "plc" => InitialLocations::Plc,
+            _ => InitialLocations::MixedSizeFd,
+        },
     })
 }
 

@@ -35,7 +35,7 @@ pub mod plc;
 pub mod render;
 
 pub use cost::{CostBreakdown, CostError, CostSettings, CostWeights, PlacementCost};
-pub use env::{CircuitEnv, CircuitEnvConfig, register};
+pub use env::{CircuitEnv, CircuitEnvConfig, InitialLocations, register};
 pub use generator::{GeneratedCircuit, GeneratorConfig, generate};
 pub use netlist::{
     AttrValue, Net, Netlist, NetlistError, Node, NodeKind, Orientation, SoftMacroRule,

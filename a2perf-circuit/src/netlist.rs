@@ -573,7 +573,7 @@ fn parse_node(p: &mut Parser<'_>, line: usize) -> PResult<RawNode> {
     }
 }
 
-fn parse_fp_bbox(comments: &[String]) -> Option<[f64; 4]> {
+pub(crate) fn parse_fp_bbox(comments: &[String]) -> Option<[f64; 4]> {
     for c in comments {
         if let Some(rest) = c.split("FP bbox:").nth(1) {
             let nums: Vec<f64> = rest

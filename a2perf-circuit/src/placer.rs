@@ -1,14 +1,20 @@
-//! A deterministic force-directed placer for soft macros and standard cells.
+//! A deterministic force-directed placer for soft macros and standard cells (and, for the
+//! mixed-size run that seeds the environment's initial locations, hard macros too).
 //!
 //! **This is our placer, not Google's** (whose `optimize_stdcells` is closed). It follows the
-//! schedule circuit_training passes to it at the end of every episode: three rounds of 100 steps,
-//! maximum move `max(W, H)/100` per step, attraction factors `[100, 1e-3, 1e-5]` and repulsion
-//! factors `[0, 1e6, 1e7]`, I/O factor 1, hard macros fixed. Per step:
+//! schedules circuit_training passes to it: at the end of every episode ([`FdSchedule::default`])
+//! three rounds of 100 steps, maximum move `f·max(W, H)/num_steps` per step with `f = 1`,
+//! attraction factors `[100, 1e-3, 1e-5]` and repulsion factors `[0, 1e6, 1e7]`, I/O factor 1,
+//! hard macros fixed; once in the environment's constructor ([`FdSchedule::mixed_size`]) the same
+//! with `f = [1, 2, 2]`, repulsion `[0, 1e5, 1e6]` and the hard macros moving as well. Per step:
 //!
-//! - attraction: every net pulls each sink towards its driver and the driver towards each sink
-//!   (spring ∝ distance × net weight × factor, × I/O factor when a port is involved);
+//! - attraction: every net pulls each sink pin towards its driver pin and the driver towards each
+//!   sink (spring ∝ distance × net weight × factor, × I/O factor when a port is involved); a pin
+//!   sits at its owner's centre plus its (oriented) offset, so a moving hard macro is pulled at
+//!   its pins;
 //! - repulsion: every overlapping pair of macros pushes apart along the line of centres with
-//!   `factor × max_move` (hard macros do not move; found with a bucket grid, not all pairs);
+//!   `factor × max_move` (placed hard macros that do not move are obstacles; pairs are found with
+//!   a bucket grid, not by testing all pairs);
 //! - displacements are normalised per axis so the largest equals the round's maximum move (as
 //!   plc_client_os does, so only the ratio of the factors matters within a step);
 //! - a move that would leave the canvas is cancelled on that axis.
@@ -33,7 +39,8 @@ use crate::netlist::NodeKind;
 pub struct FdSchedule {
     /// Steps per round.
     pub num_steps: Vec<usize>,
-    /// Maximum move per step, as a fraction of `max(W, H)/100`.
+    /// Maximum move per step, as a fraction of `max(W, H)/num_steps` of the round
+    /// (circuit_training's `max_move_distance = f·canvas_size/s`).
     pub move_distance_factors: Vec<f64>,
     /// Attraction factor per round.
     pub attract: Vec<f64>,
@@ -41,10 +48,14 @@ pub struct FdSchedule {
     pub repel: Vec<f64>,
     /// Multiplier of attraction on nets with a port.
     pub io_factor: f64,
+    /// Move the (non-fixed) hard macros too (`move_macros = True`); otherwise placed hard macros
+    /// stay where they are and act as fixed obstacles and pin anchors.
+    #[serde(default)]
+    pub move_macros: bool,
 }
 
 impl Default for FdSchedule {
-    /// circuit_training's end-of-episode schedule (`fd_placement_schedule`).
+    /// circuit_training's end-of-episode schedule (`fd_placement_schedule` with its defaults).
     fn default() -> Self {
         Self {
             num_steps: vec![100, 100, 100],
@@ -52,13 +63,37 @@ impl Default for FdSchedule {
             attract: vec![100.0, 1e-3, 1e-5],
             repel: vec![0.0, 1e6, 1e7],
             io_factor: 1.0,
+            move_macros: false,
+        }
+    }
+}
+
+impl FdSchedule {
+    /// The mixed-size run of `CircuitEnv.__init__` (A2Perf's fork and circuit_training): every
+    /// movable node, hard macros included, from the canvas centre; move factors `(1, 2, 2)`,
+    /// attraction `(1e2, 1e-3, 1e-5)`, repulsion `(0, 1e5, 1e6)`. Its result is the initial
+    /// `locations_x/y` of the observation.
+    ///
+    /// ```
+    /// use a2perf_circuit::placer::FdSchedule;
+    /// let s = FdSchedule::mixed_size();
+    /// assert!(s.move_macros);
+    /// assert_eq!(s.move_distance_factors, vec![1.0, 2.0, 2.0]);
+    /// ```
+    pub fn mixed_size() -> Self {
+        Self {
+            move_distance_factors: vec![1.0, 2.0, 2.0],
+            repel: vec![0.0, 1e5, 1e6],
+            move_macros: true,
+            ..Self::default()
         }
     }
 }
 
 /// Reusable buffers of the placer (no allocation per run once warmed up).
 ///
-/// Layout of the object slots: placed hard macros `[0, hard)`, then movable nodes `[hard, nobj)`.
+/// Layout of the object slots: obstacles (placed hard macros that do not move) `[0, hard)`, then
+/// movable nodes `[hard, nobj)`.
 /// Fixed pins have no slots: their springs are folded into per-object linear terms.
 #[derive(Clone, Debug, Default)]
 pub struct FdScratch {
@@ -101,8 +136,8 @@ struct BucketItem {
     k: u32,
 }
 
-/// Runs the force-directed placer on `cost`'s soft macros and standard cells (non-fixed), then
-/// recomputes the costs.
+/// Runs the force-directed placer on `cost`'s soft macros and standard cells (non-fixed; with
+/// [`FdSchedule::move_macros`] the non-fixed hard macros too), then recomputes the costs.
 ///
 /// ```
 /// use a2perf_circuit::{generate, GeneratorConfig, PlacementCost};
@@ -117,14 +152,21 @@ struct BucketItem {
 pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut FdScratch) {
     let n = cost.kind.len();
     let (cw, ch) = (cost.settings.canvas_width, cost.settings.canvas_height);
+    let move_macros = schedule.move_macros;
     let is_mov = |cost: &PlacementCost, i: usize| {
-        matches!(cost.kind[i], NodeKind::SoftMacro | NodeKind::StdCell) && !cost.fixed[i]
+        !cost.fixed[i]
+            && match cost.kind[i] {
+                NodeKind::SoftMacro | NodeKind::StdCell => true,
+                NodeKind::HardMacro => move_macros,
+                _ => false,
+            }
     };
+    // Obstacles first: placed hard macros that do not move.
     s.node.clear();
-    s.node.extend(
-        (0..n as u32)
-            .filter(|&i| cost.kind[i as usize] == NodeKind::HardMacro && cost.placed[i as usize]),
-    );
+    s.node.extend((0..n as u32).filter(|&i| {
+        let i = i as usize;
+        cost.kind[i] == NodeKind::HardMacro && cost.placed[i] && !is_mov(cost, i)
+    }));
     let hard = s.node.len();
     s.node
         .extend((0..n as u32).filter(|&i| is_mov(cost, i as usize)));
@@ -156,7 +198,9 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
     // over its fixed partners q), evaluated once per object per step instead of once per pin.
     // Only springs between two movable objects stay per pin: nets with a movable driver, listed
     // driver first with their movable sinks. Sinks on the driver's own node are dropped (their
-    // force is exactly zero), and so are springs between two fixed pins.
+    // force is exactly zero), and so are springs between two fixed pins. A movable pin's offset
+    // from its owner's centre (non-zero only for moving hard macros) is a constant of the spring
+    // and folds into `h` as well: the pull on p's owner is `c·(q − o_p − p)`.
     s.edges.clear();
     s.lin_g.clear();
     s.lin_g.resize(nobj, 0.0);
@@ -172,6 +216,7 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         let driver_mov = is_mov(cost, driver);
         let driver_port = cost.kind[driver] == NodeKind::Port;
         let (qx, qy) = (cost.pin_x[a], cost.pin_y[a]);
+        let (odx, ody) = (cost.pin_rdx[a], cost.pin_rdy[a]);
         for p in a + 1..b {
             let o = cost.pin_owner[p] as usize;
             let mov = is_mov(cost, o);
@@ -185,18 +230,26 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
                     s.edges.push((ko, kd, seq + 1, c));
                     s.lin_g[kd as usize] += c;
                     s.lin_g[ko as usize] += c;
+                    let (dx, dy) = (cost.pin_rdx[p] - odx, cost.pin_rdy[p] - ody);
+                    if dx != 0.0 || dy != 0.0 {
+                        let (d, k) = (kd as usize, ko as usize);
+                        s.lin_h[d][0] += c * dx;
+                        s.lin_h[d][1] += c * dy;
+                        s.lin_h[k][0] -= c * dx;
+                        s.lin_h[k][1] -= c * dy;
+                    }
                 }
                 (true, false) => {
                     let k = s.obj_of[driver] as usize;
                     s.lin_g[k] += c;
-                    s.lin_h[k][0] += c * cost.pin_x[p];
-                    s.lin_h[k][1] += c * cost.pin_y[p];
+                    s.lin_h[k][0] += c * (cost.pin_x[p] - odx);
+                    s.lin_h[k][1] += c * (cost.pin_y[p] - ody);
                 }
                 (false, true) => {
                     let k = s.obj_of[o] as usize;
                     s.lin_g[k] += c;
-                    s.lin_h[k][0] += c * qx;
-                    s.lin_h[k][1] += c * qy;
+                    s.lin_h[k][0] += c * (qx - cost.pin_rdx[p]);
+                    s.lin_h[k][1] += c * (qy - cost.pin_rdy[p]);
                 }
                 _ => {}
             }
@@ -237,9 +290,13 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         .min(schedule.repel.len())
         .min(schedule.move_distance_factors.len());
     for round in 0..rounds {
-        let max_move = schedule.move_distance_factors[round] * cw.max(ch) / 100.0;
+        let steps = schedule.num_steps[round];
+        if steps == 0 {
+            continue;
+        }
+        let max_move = schedule.move_distance_factors[round] * cw.max(ch) / steps as f64;
         let attract = schedule.attract[round];
-        for _ in 0..schedule.num_steps[round] {
+        for _ in 0..steps {
             step(
                 s,
                 (cw, ch),
@@ -406,7 +463,7 @@ fn repulsion(s: &mut FdScratch, (cw, ch): (f64, f64), mag: f64, max_soft: f64, h
     let mut n = 0;
     for b in 0..nb {
         let (lo, hi) = (s.bucket_start[b] as usize, s.bucket_start[b + 1] as usize);
-        // Hard macros come first in a bucket and never repel each other.
+        // Obstacles come first in a bucket and never repel each other.
         let first_mov = lo + s.bucket_hard[b] as usize;
         let (bcol, brow) = ((b % bc) as u32, (b / bc) as u32);
         let items = &s.bucket_items[..];
@@ -450,7 +507,7 @@ fn repulsion(s: &mut FdScratch, (cw, ch): (f64, f64), mag: f64, max_soft: f64, h
         } else {
             (ddx * r, ddy * r)
         };
-        // Hard macros' force slots absorb their share unread (cleared each step), so no branch.
+        // Obstacles' force slots absorb their share unread (cleared each step), so no branch.
         force[u][0] += fx;
         force[u][1] += fy;
         force[v][0] -= fx;

@@ -92,7 +92,7 @@ fn nums_after(s: &str, key: &str) -> Option<f64> {
         .filter(|v: &f64| v.is_finite())
 }
 
-fn parse_header(comments: &[String]) -> PlcHeader {
+pub(crate) fn parse_header(comments: &[String]) -> PlcHeader {
     let mut h = PlcHeader::default();
     for c in comments {
         let c = c.trim();

@@ -1,18 +1,14 @@
 //! Environment behaviour: episodes, observation layout, masks, registry, determinism.
 
+mod common;
+
 use std::collections::BTreeMap;
-use std::path::Path;
 
 use a2perf_circuit::env::{
     A2PERF_INFEASIBLE_REWARD, FEATURE_DIM, GRID_CHANNELS, INFEASIBLE_REWARD,
 };
-use a2perf_core::{Action, Env, Registry, RngStream, Space, Value};
-
-fn registry() -> Registry {
-    let mut reg = Registry::new();
-    a2perf_circuit::register(&mut reg);
-    reg
-}
+use a2perf_core::{Action, Env, RngStream, Space, Value};
+use common::{coarse_small, infeasible, registry, replay, shared_circuit_dir};
 
 fn random_episode(env: &mut dyn Env, seed: u64) -> (f64, usize, Vec<(String, f64)>) {
     let mut rng = RngStream::new(seed, "test/actions");
@@ -189,17 +185,9 @@ fn padded_action_layout() {
 
 #[test]
 fn toy_macro_with_shared_files() {
-    let dir = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/data/circuit/toy_macro_stdcell"
-    ));
-    if !dir.exists() {
-        if std::env::var("A2PERF_REQUIRE_SHARED").as_deref() == Ok("1") {
-            panic!("A2PERF_REQUIRE_SHARED=1 but {} is missing", dir.display());
-        }
-        eprintln!("skipping: {} not present", dir.display());
+    let Some(dir) = shared_circuit_dir("toy_macro_stdcell") else {
         return;
-    }
+    };
     let reg = registry();
     let mut p = BTreeMap::new();
     p.insert(
@@ -231,39 +219,12 @@ fn toy_macro_with_shared_files() {
     assert!(step.info.get("wirelength").unwrap() > 0.0);
 }
 
-/// Replays `actions` and returns the final reward, whether the episode ended infeasible, and the
-/// number of steps taken.
-fn replay(env: &mut dyn Env, seed: u64, actions: &[usize]) -> (f64, bool, usize) {
-    env.reset(Some(seed)).unwrap();
-    for (i, &a) in actions.iter().enumerate() {
-        let step = env.step(&Action::Discrete(a)).unwrap();
-        if step.done() {
-            let infeasible = step.info.iter().any(|(k, v)| k == "infeasible" && v == 1.0);
-            return (step.reward, infeasible, i + 1);
-        }
-    }
-    panic!("the episode did not end");
-}
-
 #[test]
 fn infeasible_reward_is_below_feasible_placements_with_an_a2perf_switch() {
     // A coarser grid (12×12 instead of 16×16) leaves fewer legal cells, so some random
     // placements strand a macro.
     let reg = registry();
-    let coarse = |extra: &[(&str, Value)]| {
-        let mut p: BTreeMap<String, Value> = [
-            ("grid_cols".to_string(), Value::Int(12)),
-            ("grid_rows".to_string(), Value::Int(12)),
-        ]
-        .into_iter()
-        .collect();
-        for (k, v) in extra {
-            p.insert(k.to_string(), v.clone());
-        }
-        reg.make_env("CircuitTraining-Synthetic-Small-v0", &p)
-            .unwrap()
-    };
-    let mut env = coarse(&[]);
+    let mut env = coarse_small(&reg, &[]);
     assert_eq!(
         env.spec()
             .metadata
@@ -285,8 +246,7 @@ fn infeasible_reward_is_below_feasible_placements_with_an_a2perf_switch() {
             actions.push(a);
             let step = env.step(&Action::Discrete(a)).unwrap();
             if step.done() {
-                let infeasible = step.info.iter().any(|(k, v)| k == "infeasible" && v == 1.0);
-                if infeasible {
+                if infeasible(&step.info) {
                     assert_eq!(step.reward, INFEASIBLE_REWARD);
                     infeasible_run.get_or_insert((seed, actions.clone()));
                 } else {
@@ -307,7 +267,10 @@ fn infeasible_reward_is_below_feasible_placements_with_an_a2perf_switch() {
         "{worst_feasible}"
     );
     // The same actions under the compatibility switch end the same way, with A2Perf's reward.
-    let mut a2perf = coarse(&[("infeasible_reward", Value::Float(A2PERF_INFEASIBLE_REWARD))]);
+    let mut a2perf = coarse_small(
+        &reg,
+        &[("infeasible_reward", Value::Float(A2PERF_INFEASIBLE_REWARD))],
+    );
     assert_eq!(
         replay(a2perf.as_mut(), seed, &actions),
         (A2PERF_INFEASIBLE_REWARD, true, actions.len())

@@ -90,7 +90,8 @@ pub struct EnvConfig {
     pub mode: Mode,
     /// Episode length in test mode (and the curriculum's final length).
     pub episode_steps: usize,
-    /// Curriculum horizon in non-terminal steps (train mode): `T = (1−s³)·20 + s³·episode_steps`.
+    /// Curriculum horizon in steps that do not end an episode (train mode):
+    /// `T = (1−s³)·20 + s³·episode_steps`.
     pub curriculum_steps: f64,
     /// Probability of starting at a random phase (otherwise a warm-up episode).
     pub ref_state_init_prob: f64,
@@ -103,6 +104,10 @@ pub struct EnvConfig {
     pub randomize: bool,
     /// Rapier solver iterations per physics step.
     pub solver_iterations: usize,
+    /// End an episode at the length limit with `terminated` (A2Perf's environment, whose
+    /// gymnasium compatibility layer reports motion_imitation's time limit as a termination)
+    /// instead of `truncated` (Gymnasium semantics, what motion_imitation's own `info` says).
+    pub time_limit_terminates: bool,
 }
 
 impl EnvConfig {
@@ -118,6 +123,7 @@ impl EnvConfig {
             control_latency: 0.002,
             randomize: false,
             solver_iterations: SimConfig::default().solver_iterations,
+            time_limit_terminates: false,
         }
     }
 }
@@ -753,9 +759,12 @@ impl Env for LocomotionEnv {
         self.action_hist[0] = target;
 
         out.reward = terms.total();
-        out.terminated = termination.is_some();
-        out.truncated = !out.terminated && self.steps >= self.episode_limit;
-        if !out.terminated {
+        let time_limit = termination.is_none() && self.steps >= self.episode_limit;
+        out.terminated = termination.is_some() || (time_limit && self.config.time_limit_terminates);
+        out.truncated = time_limit && !self.config.time_limit_terminates;
+        // The curriculum counts the steps that do not end the episode (motion_imitation's
+        // `ImitationWrapperEnv`: `if not done`, the time limit included in `done`).
+        if !out.terminated && !out.truncated {
             self.total_nonterminal_steps += 1;
         }
         self.needs_reset = out.terminated || out.truncated;

@@ -50,7 +50,7 @@ fn common_params() -> Vec<ParamSpec> {
             "curriculum_steps",
             ParamKind::Float,
             Value::Float(30e6),
-            "train mode: non-terminal steps until episodes reach full length",
+            "train mode: steps that do not end an episode until episodes reach full length",
         ),
         ParamSpec::new(
             "randomize",
@@ -75,6 +75,12 @@ fn common_params() -> Vec<ParamSpec> {
             ParamKind::Int,
             Value::Int(1),
             "rapier solver iterations per 1 ms step (2: ~6x tighter joints, ~35% slower)",
+        ),
+        ParamSpec::new(
+            "time_limit_terminates",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "report the episode-length limit as terminated (A2Perf: its gymnasium compatibility layer turns motion_imitation's time limit into terminated=True) instead of truncated",
         ),
     ]
 }
@@ -145,6 +151,9 @@ pub fn config_from_params(
         return Err(bad("solver_iterations", "must be in 1..=50"));
     }
     c.solver_iterations = it;
+    c.time_limit_terminates = p
+        .bool("time_limit_terminates")
+        .map_err(|e| bad("time_limit_terminates", e))?;
     Ok(c)
 }
 

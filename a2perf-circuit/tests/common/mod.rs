@@ -1,0 +1,94 @@
+//! Helpers shared by the environment tests.
+#![allow(dead_code)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use a2perf_core::{Action, Env, Registry, RngStream, Value};
+
+/// A registry with the circuit environments.
+pub fn registry() -> Registry {
+    let mut reg = Registry::new();
+    a2perf_circuit::register(&mut reg);
+    reg
+}
+
+/// Environment parameters from `(name, value)` pairs.
+pub fn params(pairs: &[(&str, Value)]) -> BTreeMap<String, Value> {
+    pairs
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect()
+}
+
+/// `../shared/data/circuit/<name>`, or `None` (with the reason printed) when it is absent;
+/// absent data fails the test when `A2PERF_REQUIRE_SHARED=1`.
+pub fn shared_circuit_dir(name: &str) -> Option<PathBuf> {
+    let dir = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/data/circuit"
+    ))
+    .join(name);
+    if dir.exists() {
+        return Some(dir);
+    }
+    if std::env::var("A2PERF_REQUIRE_SHARED").as_deref() == Ok("1") {
+        panic!("A2PERF_REQUIRE_SHARED=1 but {} is missing", dir.display());
+    }
+    eprintln!("skipping: {} not present", dir.display());
+    None
+}
+
+/// Whether a step's info flags an infeasible end.
+pub fn infeasible(info: &a2perf_core::Info) -> bool {
+    info.get("infeasible") == Some(1.0)
+}
+
+/// Random legal episodes (episode seeds `0..200`) until one strands a macro; returns its seed and
+/// actions. The environment must be able to strand one (e.g. a coarse grid).
+pub fn find_infeasible_episode(env: &mut dyn Env) -> (u64, Vec<usize>) {
+    let space = env.spec().action_space.clone();
+    for seed in 0..200u64 {
+        let mut rng = RngStream::new(seed, "test/infeasible");
+        let mut obs = env.reset(Some(seed)).unwrap();
+        let mut actions = Vec::new();
+        loop {
+            let Some(Action::Discrete(a)) = space.sample(&mut rng, obs.action_mask.as_deref())
+            else {
+                panic!("a legal action while the episode runs");
+            };
+            actions.push(a);
+            let step = env.step(&Action::Discrete(a)).unwrap();
+            if step.done() {
+                if infeasible(&step.info) {
+                    return (seed, actions);
+                }
+                break;
+            }
+            obs = step.observation;
+        }
+    }
+    panic!("no infeasible episode in 200 random ones");
+}
+
+/// Synthetic-Small on a coarser 12×12 grid (instead of 16×16): fewer legal cells, so some random
+/// placements strand a macro.
+pub fn coarse_small(reg: &Registry, extra: &[(&str, Value)]) -> Box<dyn Env> {
+    let mut p = params(&[("grid_cols", Value::Int(12)), ("grid_rows", Value::Int(12))]);
+    p.extend(params(extra));
+    reg.make_env("CircuitTraining-Synthetic-Small-v0", &p)
+        .unwrap()
+}
+
+/// Replays `actions` from a reset and returns the final reward, whether the episode ended
+/// infeasible, and the number of steps taken.
+pub fn replay(env: &mut dyn Env, seed: u64, actions: &[usize]) -> (f64, bool, usize) {
+    env.reset(Some(seed)).unwrap();
+    for (i, &a) in actions.iter().enumerate() {
+        let step = env.step(&Action::Discrete(a)).unwrap();
+        if step.done() {
+            return (step.reward, infeasible(&step.info), i + 1);
+        }
+    }
+    panic!("the episode did not end");
+}
