@@ -154,9 +154,9 @@ impl SuiteSource {
     /// Display name.
     pub fn label(self) -> &'static str {
         match self {
-            SuiteSource::Config => "config",
-            SuiteSource::Profile => "profile",
-            SuiteSource::Registry => "registry default",
+            SuiteSource::Config => "the config",
+            SuiteSource::Profile => "the profile",
+            SuiteSource::Registry => "the registry",
         }
     }
 }

@@ -168,6 +168,38 @@ fn profiles_and_suites_are_recorded_and_generalize_runs_the_listed_tasks() {
         "env.length = 8 (overrides the profile's 6)"
     );
 
+    // The report says under each table which profile and suite its runs used.
+    let out = d.join("report");
+    let dirs: Vec<PathBuf> = all.iter().map(ExperimentPlan::experiment_dir).collect();
+    report::write_report(
+        &dirs,
+        &out,
+        &ReportOptions {
+            bootstrap_reps: 100,
+            seed: 0,
+        },
+    )
+    .unwrap();
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let table = section(&md, "## Corridor-v0[profile=orig] (");
+    assert!(
+        table.contains("\nProfile: orig — env.length = 6\n"),
+        "{table}"
+    );
+    assert!(table.contains("\nGeneralization suite: from the profile: profiled\n"));
+    let table = section(&md, "## Corridor-v0 (");
+    assert!(
+        table.contains("**Mixed generalization suites in this table**"),
+        "plain and listed share the task: {table}"
+    );
+    assert!(table.contains("RANDOM_SEARCH:LISTED: from the config: short, long"));
+    assert!(
+        table.contains(
+            "RANDOM_SEARCH:PLAIN: from the registry: corridor_6, corridor_8, corridor_12"
+        )
+    );
+    assert!(table.contains("\nProfile: none (corrected defaults)\n"));
+
     // run.json files written before profiles and suites existed still load, and generalize
     // falls back to the registry's suite.
     for plan in [plain, profiled_plan] {
@@ -600,4 +632,144 @@ fn the_shipped_tables_hold_the_papers_eight_tasks() {
             .id,
         "circuit_ariane"
     );
+}
+
+#[test]
+fn a_paper_style_profile_gives_every_domain_its_suite_and_switches() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    write(
+        d,
+        "profile.ron",
+        r#"(profile: (
+            name: "a2perf",
+            env: {"circuit_training": (infeasible_reward: -1.0, padded_action: true)},
+            generalization: {
+                "circuit_training": [
+                    (env: "CircuitTraining-ToyMacro-v0", name: "toy_macro_stdcell",
+                     params: (netlist_file: "/data/toy_macro_stdcell/netlist.pb.txt")),
+                    (env: "CircuitTraining-Ariane-v0", name: "ariane",
+                     params: (netlist_file: "/data/ariane/netlist.pb.txt")),
+                ],
+                "web_navigation": [
+                    (env: "WebNavigation-Difficulty-01-v0", name: "difficulty_level_1_num_websites_1", params: (num_websites: 1)),
+                    (env: "WebNavigation-Difficulty-01-v0", name: "difficulty_level_1_num_websites_5", params: (num_websites: 5)),
+                    (env: "WebNavigation-Difficulty-01-v0", name: "difficulty_level_1_num_websites_10", params: (num_websites: 10)),
+                ],
+                "quadruped_locomotion": [
+                    (env: "QuadrupedLocomotion-DogPace-v0", name: "dog_pace"),
+                    (env: "QuadrupedLocomotion-DogTrot-v0", name: "dog_trot"),
+                    (env: "QuadrupedLocomotion-DogSpin-v0", name: "dog_spin"),
+                ],
+            },
+        ))"#,
+    );
+    let exp = |name: &str, env: &str, algo: &str| {
+        write(
+            d,
+            &format!("{name}.ron"),
+            &format!(
+                r#"(include: ["profile.ron"], name: "{name}", env: {env}, algorithm: (name: "{algo}"))"#
+            ),
+        )
+    };
+    let circuit = exp(
+        "circuit",
+        r#"(id: "CircuitTraining-ToyMacro-v0", netlist_file: "/data/toy_macro_stdcell/netlist.pb.txt")"#,
+        "ppo",
+    );
+    let web = exp(
+        "web",
+        r#"(id: "WebNavigation-Difficulty-01-v0", num_websites: 5)"#,
+        "ddqn",
+    );
+    let locomotion = exp(
+        "locomotion",
+        r#"(id: "QuadrupedLocomotion-DogPace-v0")"#,
+        "sac",
+    );
+    let reg = a2perf_pipeline::registry::full_registry();
+    let all = plans(&[circuit, web, locomotion], &[], &reg);
+    let suite_of = |p: &ExperimentPlan| {
+        let s = p.generalization.suite.as_ref().unwrap();
+        assert_eq!(s.source, SuiteSource::Profile, "{}", p.name);
+        s.tasks.clone()
+    };
+
+    let circuit = &all[0];
+    assert_eq!(
+        circuit.task.name,
+        "CircuitTraining-ToyMacro-v0[profile=a2perf,netlist_file=\"/data/toy_macro_stdcell/netlist.pb.txt\"]"
+    );
+    let profile = circuit.task.profile.as_ref().unwrap();
+    assert_eq!(
+        profile
+            .in_force()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>(),
+        ["env.infeasible_reward = -1.0", "env.padded_action = true"]
+    );
+    assert_eq!(
+        circuit.task.env_params["infeasible_reward"],
+        Value::Float(-1.0)
+    );
+    let tasks = suite_of(circuit);
+    assert_eq!(
+        tasks.iter().map(|t| t.name.as_str()).collect::<Vec<_>>(),
+        ["toy_macro_stdcell", "ariane"]
+    );
+    for t in &tasks {
+        // The suite runs under the profile's switches too.
+        assert_eq!(
+            t.params["infeasible_reward"],
+            Value::Float(-1.0),
+            "{}",
+            t.name
+        );
+        assert_eq!(t.params["padded_action"], Value::Bool(true), "{}", t.name);
+    }
+    assert_eq!(
+        tasks[1].params["netlist_file"],
+        Value::Str("/data/ariane/netlist.pb.txt".into())
+    );
+
+    let web = &all[1];
+    assert_eq!(
+        web.task.name,
+        "WebNavigation-Difficulty-01-v0[profile=a2perf,num_websites=5]"
+    );
+    assert!(web.task.profile.as_ref().unwrap().switches.is_empty());
+    let tasks = suite_of(web);
+    assert_eq!(
+        tasks
+            .iter()
+            .map(|t| t.params["num_websites"].clone())
+            .collect::<Vec<_>>(),
+        [Value::Int(1), Value::Int(5), Value::Int(10)]
+    );
+
+    let tasks = suite_of(&all[2]);
+    assert_eq!(
+        tasks.iter().map(|t| t.env_id.as_str()).collect::<Vec<_>>(),
+        [
+            "QuadrupedLocomotion-DogPace-v0",
+            "QuadrupedLocomotion-DogTrot-v0",
+            "QuadrupedLocomotion-DogSpin-v0"
+        ]
+    );
+
+    // Without the profile the domain's registered suite applies.
+    let bare = write(
+        d,
+        "bare.ron",
+        r#"(env: (id: "CircuitTraining-Synthetic-Small-v0"), algorithm: (name: "ppo"))"#,
+    );
+    let bare = &plans(&[bare], &[], &reg)[0];
+    let suite = bare.generalization.suite.as_ref().unwrap();
+    assert_eq!(suite.source, SuiteSource::Registry);
+    assert_eq!(
+        suite.tasks.len(),
+        reg.generalization("circuit_training").len()
+    );
+    assert!(bare.task.profile.is_none());
 }

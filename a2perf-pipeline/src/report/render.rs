@@ -106,10 +106,11 @@ fn describe_profile(p: Option<&super::ProfileRecord>) -> String {
     }
 }
 
+/// `from <source>: <tasks>`.
 fn describe_suite(u: &super::SuiteUse) -> String {
     match u.source {
         None => "the domain's registry default (not recorded by these runs)".into(),
-        Some(source) => format!("({}) {}", source.label(), u.tasks.join(", ")),
+        Some(source) => format!("from {}: {}", source.label(), u.tasks.join(", ")),
     }
 }
 
