@@ -168,7 +168,8 @@ pub struct GeneralizationTask {
     pub name: String,
     /// Environment id.
     pub env_id: String,
-    /// Parameters that differ from the id's defaults (the profile's switches included).
+    /// Parameters the task sets, the profile's switches included (the others take the
+    /// environment's defaults).
     pub params: BTreeMap<String, Value>,
 }
 
