@@ -91,6 +91,11 @@ pub struct ReportArgs {
     /// Bootstrap resamples for confidence intervals (default: the runs' config, 50,000).
     #[arg(long)]
     pub bootstrap_reps: Option<usize>,
+    /// The paper's tables (e.g. docs/paper/tables.json): adds the paper's column beside ours
+    /// under every table whose task matches, and the ratio ours / paper for energy, RAM and
+    /// wall-clock time.
+    #[arg(long, value_name = "TABLES_JSON")]
+    pub paper: Option<PathBuf>,
 }
 
 /// Arguments of `a2perf run`.
@@ -330,7 +335,12 @@ fn print_report(out: &Path, report: &pipeline::report::Report) {
     }
 }
 
-fn write_report(dirs: &[PathBuf], out: &Path, reps: Option<usize>) -> Result<()> {
+fn write_report(
+    dirs: &[PathBuf],
+    out: &Path,
+    reps: Option<usize>,
+    paper: Option<&pipeline::report::paper::PaperTables>,
+) -> Result<()> {
     let opts = ReportOptions {
         bootstrap_reps: match reps {
             Some(r) => r,
@@ -338,8 +348,14 @@ fn write_report(dirs: &[PathBuf], out: &Path, reps: Option<usize>) -> Result<()>
         },
         seed: 0,
     };
-    let report = pipeline::report::write_report(dirs, out, &opts)?;
+    let report = pipeline::report::write_report_with_paper(dirs, out, &opts, paper)?;
     print_report(out, &report);
+    if paper.is_some() {
+        println!(
+            "paper: {} of the report's tables match a task of the paper's",
+            report.paper.len()
+        );
+    }
     Ok(())
 }
 
@@ -349,7 +365,13 @@ pub fn report(args: &ReportArgs) -> Result<()> {
         .output
         .clone()
         .unwrap_or_else(|| args.dirs[0].join("report"));
-    write_report(&args.dirs, &out, args.bootstrap_reps)
+    // Read before anything is written, so a bad file leaves an earlier report untouched.
+    let tables = args
+        .paper
+        .as_deref()
+        .map(pipeline::report::paper::PaperTables::load)
+        .transpose()?;
+    write_report(&args.dirs, &out, args.bootstrap_reps, tables.as_ref())
 }
 
 /// `a2perf run`: train → infer → generalize → report.

@@ -1,5 +1,6 @@
-//! `a2perf generalize`: greedy returns of a trained policy on every task of its domain's
-//! generalization suite, and their sum.
+//! `a2perf generalize`: greedy returns of a trained policy on every task of its generalization
+//! suite (the one recorded in `run.json`: the config's, its profile's or the registry's for the
+//! domain), and their sum.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -7,6 +8,7 @@ use std::path::Path;
 use a2perf_core::{ActMode, Registry, RngStream, Value, rollout, write_json_atomic};
 use serde::{Deserialize, Serialize};
 
+use super::plan::{GeneralizationTask, SuiteSource};
 use super::{GENERALIZATION_FILE, LoadedRun, PipelineError, Result, progress};
 
 /// Result on one task of the suite.
@@ -31,6 +33,10 @@ pub struct TaskResult {
 pub struct GeneralizationResults {
     /// Domain of the suite.
     pub domain: String,
+    /// Where the suite came from (absent in files written before suites were configurable,
+    /// which always used the registry's).
+    #[serde(default)]
+    pub source: Option<SuiteSource>,
     /// Rollouts per task.
     pub episodes: usize,
     /// Per-task results, in suite order.
@@ -40,8 +46,9 @@ pub struct GeneralizationResults {
     pub sum_of_mean_returns: Option<f64>,
 }
 
-/// Rolls the final policy of a complete run out on every generalization task of its domain and
-/// writes `generalization.json`.
+/// Rolls the final policy of a complete run out on every task of its generalization suite and
+/// writes `generalization.json`. The suite is the one `run.json` records; a run recorded without
+/// one uses the registry's suite for its domain.
 pub fn generalize_run(
     registry: &Registry,
     dir: &Path,
@@ -56,10 +63,22 @@ pub fn generalize_run(
             "generalization needs at least one episode per task".into(),
         ));
     }
-    let suite = registry.generalization(&run.record.domain).to_vec();
+    let (source, suite): (SuiteSource, Vec<GeneralizationTask>) =
+        match &run.record.generalization.suite {
+            Some(s) => (s.source, s.tasks.clone()),
+            None => (
+                SuiteSource::Registry,
+                registry
+                    .generalization(&run.record.domain)
+                    .iter()
+                    .map(GeneralizationTask::from)
+                    .collect(),
+            ),
+        };
     if suite.is_empty() {
         return Err(PipelineError::Invalid(format!(
-            "domain `{}` has no generalization suite registered",
+            "domain `{}` has no generalization suite registered (list one in the config's \
+             `generalization.tasks`)",
             run.record.domain
         )));
     }
@@ -106,6 +125,7 @@ pub fn generalize_run(
     let sum = tasks.iter().map(|t| t.mean_return).sum::<Option<f64>>();
     let results = GeneralizationResults {
         domain: run.record.domain.clone(),
+        source: Some(source),
         episodes,
         tasks,
         sum_of_mean_returns: sum,

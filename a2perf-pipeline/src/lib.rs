@@ -71,9 +71,10 @@ pub mod train;
 pub use generalize::{GeneralizationResults, generalize_run};
 pub use infer::{InferOptions, InferenceResults, infer_run};
 pub use plan::{
-    AlgorithmSpec, ExperimentPlan, GeneralizationSettings, InferenceSettings, LoadedPlans,
-    MetricSettings, ObservationSource, RunJob, Shard, Suite, TaskSpec, from_experiment, grid,
-    load_plans, parse_seeds,
+    AlgorithmSpec, ExperimentPlan, GeneralizationSettings, GeneralizationSuite, GeneralizationTask,
+    InferenceSettings, LoadedPlans, MetricSettings, ObservationSource, ProfileRecord,
+    ProfileSwitch, RunJob, Shard, Suite, SuiteSource, TaskSpec, from_experiment, grid, load_plans,
+    parse_seeds,
 };
 pub use run::{RunEvent, RunOptions, expand_runs, run_experiments};
 pub use sysinfo::SystemInfo;

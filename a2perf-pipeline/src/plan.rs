@@ -19,6 +19,51 @@ pub struct TaskSpec {
     pub env_id: String,
     /// Environment parameters (resolved in `run.json`).
     pub env_params: BTreeMap<String, Value>,
+    /// The profile the config named, with the switches it gives this environment (absent in
+    /// runs without a profile and in `run.json` files written before profiles existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile: Option<ProfileRecord>,
+}
+
+/// A profile as recorded with a run: its name and every switch it gives the run's environment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProfileRecord {
+    /// Profile name (`a2perf`).
+    pub name: String,
+    /// The switches, sorted by parameter.
+    pub switches: Vec<ProfileSwitch>,
+}
+
+impl ProfileRecord {
+    /// The switches in force (not overridden by a config layer).
+    pub fn in_force(&self) -> impl Iterator<Item = &ProfileSwitch> {
+        self.switches.iter().filter(|s| s.overridden.is_none())
+    }
+}
+
+/// One environment parameter a profile sets.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProfileSwitch {
+    /// Environment parameter (`infeasible_reward`).
+    pub param: String,
+    /// The profile's value.
+    pub value: Value,
+    /// The value in force instead, when a config layer or `--set` overrode the switch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overridden: Option<Value>,
+}
+
+impl std::fmt::Display for ProfileSwitch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.overridden {
+            None => write!(f, "env.{} = {}", self.param, self.value),
+            Some(v) => write!(
+                f,
+                "env.{} = {v} (overrides the profile's {})",
+                self.param, self.value
+            ),
+        }
+    }
 }
 
 /// An algorithm and its hyperparameters.
@@ -67,11 +112,74 @@ impl Default for InferenceSettings {
 pub struct GeneralizationSettings {
     /// Greedy rollouts per task (the paper: 100).
     pub episodes: usize,
+    /// The tasks to roll out on, resolved when the run was planned. `None` (plans built without a
+    /// config, and `run.json` files written before suites were configurable): the registry's
+    /// suite for the run's domain at `generalize` time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub suite: Option<GeneralizationSuite>,
 }
 
 impl Default for GeneralizationSettings {
     fn default() -> Self {
-        Self { episodes: 100 }
+        Self {
+            episodes: 100,
+            suite: None,
+        }
+    }
+}
+
+/// A generalization suite and where it came from. The generalization score is a sum over its
+/// tasks, so two scores are comparable only over the same suite.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GeneralizationSuite {
+    /// Where the list came from.
+    pub source: SuiteSource,
+    /// The tasks, in order.
+    pub tasks: Vec<GeneralizationTask>,
+}
+
+/// Where a run's generalization suite came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SuiteSource {
+    /// The experiment config's `generalization.tasks`.
+    Config,
+    /// The profile's suite for the domain.
+    Profile,
+    /// The registry's suite for the domain.
+    Registry,
+}
+
+impl SuiteSource {
+    /// Display name.
+    pub fn label(self) -> &'static str {
+        match self {
+            SuiteSource::Config => "the config",
+            SuiteSource::Profile => "the profile",
+            SuiteSource::Registry => "the registry",
+        }
+    }
+}
+
+/// One task of a generalization suite.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GeneralizationTask {
+    /// Task name (`difficulty_level_1_num_websites_5`).
+    pub name: String,
+    /// Environment id.
+    pub env_id: String,
+    /// Parameters the task sets, the profile's switches included (the others take the
+    /// environment's defaults).
+    pub params: BTreeMap<String, Value>,
+}
+
+impl From<&a2perf_core::TaskRef> for GeneralizationTask {
+    fn from(t: &a2perf_core::TaskRef) -> Self {
+        Self {
+            name: t.name.clone(),
+            env_id: t.env_id.clone(),
+            params: t.params.clone(),
+        }
     }
 }
 
@@ -195,18 +303,44 @@ pub fn from_experiment(
     let env = exp.require_env().map_err(invalid)?;
     let algo = exp.require_algorithm().map_err(invalid)?;
     let defaults = registry.env_params(&env.id, &BTreeMap::new())?;
-    let changed: Vec<String> = env
-        .params
-        .values()
+    // The profile's switches in force are summed up as `profile=NAME`; parameters that differ
+    // from the defaults with the switches applied are listed (an overridden switch too, even
+    // when overridden back to the registry's default).
+    let mut changed: Vec<String> = exp
+        .profile
         .iter()
-        .filter(|(k, v)| defaults.values().get(*k) != Some(*v))
-        .map(|(k, v)| format!("{k}={v}"))
+        .map(|p| format!("profile={}", p.name))
         .collect();
+    changed.extend(
+        env.params
+            .values()
+            .iter()
+            .filter(|(k, v)| {
+                env.profile_switches
+                    .get(*k)
+                    .or_else(|| defaults.values().get(*k))
+                    != Some(*v)
+            })
+            .map(|(k, v)| format!("{k}={v}")),
+    );
     let task_name = if changed.is_empty() {
         env.id.clone()
     } else {
         format!("{}[{}]", env.id, changed.join(","))
     };
+    let profile = exp.profile.as_ref().map(|p| ProfileRecord {
+        name: p.name.clone(),
+        switches: env
+            .profile_switches
+            .iter()
+            .map(|(param, value)| ProfileSwitch {
+                param: param.clone(),
+                value: value.clone(),
+                overridden: env.params.get(param).filter(|v| *v != value).cloned(),
+            })
+            .collect(),
+    });
+    let suite = generalization_suite(exp, &env.id, registry)?;
     if exp.seeds.is_empty() {
         return Err(PipelineError::Invalid(format!(
             "experiment {}: no seeds",
@@ -238,6 +372,7 @@ pub fn from_experiment(
             name: task_name,
             env_id: env.id.clone(),
             env_params: env.params.values().clone(),
+            profile,
         },
         AlgorithmSpec {
             name: algo.name.clone(),
@@ -256,6 +391,7 @@ pub fn from_experiment(
     };
     plan.generalization = GeneralizationSettings {
         episodes: exp.generalization.episodes,
+        suite,
     };
     plan.metrics = metrics;
     if let Some(path) = algo.params.get("dataset").and_then(Value::as_str) {
@@ -269,6 +405,40 @@ pub fn from_experiment(
             .map_err(|e| e.to_string())
     }));
     Ok(plan)
+}
+
+/// The generalization suite of an experiment on `env_id`: the config's `generalization.tasks`,
+/// else its profile's suite for the domain, else the registry's (`None` when the domain has
+/// none). A profile's switches are filled into every task's unset parameters, so the suite runs
+/// under the same semantics as the training task.
+pub fn generalization_suite(
+    exp: &a2perf_core::Experiment,
+    env_id: &str,
+    registry: &a2perf_core::Registry,
+) -> Result<Option<GeneralizationSuite>> {
+    let domain = &registry.env(env_id)?.domain;
+    let (source, tasks) = if let Some(tasks) = &exp.generalization.tasks {
+        (SuiteSource::Config, tasks.as_slice())
+    } else if let Some(tasks) = exp
+        .profile
+        .as_ref()
+        .and_then(|p| p.generalization.get(domain))
+    {
+        (SuiteSource::Profile, tasks.as_slice())
+    } else {
+        (SuiteSource::Registry, registry.generalization(domain))
+    };
+    if tasks.is_empty() {
+        return Ok(None);
+    }
+    let tasks = tasks
+        .iter()
+        .map(|t| match &exp.profile {
+            Some(p) => GeneralizationTask::from(&p.apply_to_task(t, registry)),
+            None => GeneralizationTask::from(t),
+        })
+        .collect();
+    Ok(Some(GeneralizationSuite { source, tasks }))
 }
 
 /// `s` with characters that are awkward in paths replaced by `_`.
@@ -305,7 +475,7 @@ pub struct RunJob {
 ///
 /// ```
 /// use a2perf_pipeline::{grid, AlgorithmSpec, ExperimentPlan, Shard, TaskSpec};
-/// let task = TaskSpec { name: "t".into(), env_id: "T-v0".into(), env_params: Default::default() };
+/// let task = TaskSpec { name: "t".into(), env_id: "T-v0".into(), env_params: Default::default(), profile: None };
 /// let algo = AlgorithmSpec { name: "a".into(), params: Default::default() };
 /// let plan = ExperimentPlan::new("e", "/tmp/out", task, algo, vec![0, 1, 2], Default::default());
 /// assert_eq!(grid(&[plan.clone()], None).len(), 3);
@@ -539,6 +709,7 @@ mod tests {
             name: "t".into(),
             env_id: "T-v0".into(),
             env_params: BTreeMap::new(),
+            profile: None,
         };
         let algo = AlgorithmSpec {
             name: "a".into(),

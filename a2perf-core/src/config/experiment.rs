@@ -6,9 +6,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::error::{ConfigError, Location};
+use super::profile::{Profile, parse_profile, parse_tasks, tasks_to_value};
 use super::syntax::{Field, Node, NodeValue};
 use crate::policy::TrainingSettings;
-use crate::registry::Registry;
+use crate::registry::{Registry, TaskRef};
 use crate::value::{ParamKind, ParamSpec, Params, Value, did_you_mean};
 
 /// The file name pipelines write the operative config to, next to their results.
@@ -21,6 +22,10 @@ pub struct EnvConfig {
     pub id: String,
     /// Every parameter in force, registry defaults filled in.
     pub params: Params,
+    /// The switches the experiment's profile gives this environment (parameter → the profile's
+    /// value). A switch is in force when `params` holds that value; a config layer that sets the
+    /// parameter itself overrides it.
+    pub profile_switches: BTreeMap<String, Value>,
 }
 
 /// The algorithm an experiment trains.
@@ -77,6 +82,9 @@ pub struct InferenceSettings {
 pub struct GeneralizationSettings {
     /// Episodes per generalization task.
     pub episodes: usize,
+    /// The suite, when the config lists one (`tasks: [...]`); otherwise the profile's suite for
+    /// the domain, else the registry's, is used.
+    pub tasks: Option<Vec<TaskRef>>,
 }
 
 /// Settings of the system and reliability metrics.
@@ -109,6 +117,9 @@ pub struct OutputSettings {
 pub struct Experiment {
     /// Experiment name (defaults to the file's stem).
     pub name: String,
+    /// The profile (`profile: "a2perf"` or `profile: (name: ..., env: ..., generalization: ...)`),
+    /// if the config names one.
+    pub profile: Option<Profile>,
     /// The environment, if the config names one.
     pub env: Option<EnvConfig>,
     /// The algorithm, if the config names one.
@@ -128,8 +139,9 @@ pub struct Experiment {
 }
 
 /// Top-level keys, in the order the operative config lists them.
-const TOP_KEYS: [&str; 9] = [
+const TOP_KEYS: [&str; 10] = [
     "name",
+    "profile",
     "env",
     "algorithm",
     "seeds",
@@ -267,7 +279,7 @@ fn known_list<'a>(names: impl Iterator<Item = &'a str>) -> String {
         .join(", ")
 }
 
-fn unknown_key<'a>(
+pub(super) fn unknown_key<'a>(
     field: &Field,
     prefix: &str,
     known: impl Iterator<Item = &'a str> + Clone,
@@ -281,7 +293,7 @@ fn unknown_key<'a>(
     }
 }
 
-fn as_struct<'a>(node: &'a Node, key: &str) -> Result<&'a [Field], ConfigError> {
+pub(super) fn as_struct<'a>(node: &'a Node, key: &str) -> Result<&'a [Field], ConfigError> {
     match &node.value {
         NodeValue::Struct(fields) => Ok(fields),
         _ => Err(ConfigError::WrongType {
@@ -295,7 +307,7 @@ fn as_struct<'a>(node: &'a Node, key: &str) -> Result<&'a [Field], ConfigError> 
     }
 }
 
-fn check_kind(
+pub(super) fn check_kind(
     spec: &ParamSpec,
     node: &Node,
     key: &str,
@@ -327,18 +339,33 @@ fn check_kind(
     })
 }
 
-/// Checks a fixed section against its schema; every key is present in the result.
+/// Keys of a fixed section whose values are structured (lists of structs) and checked on their
+/// own rather than against [`section_schema`].
+fn structured_keys(section: &str) -> &'static [&'static str] {
+    match section {
+        "generalization" => &["tasks"],
+        _ => &[],
+    }
+}
+
+/// Checks a fixed section against its schema (keys of [`structured_keys`] are left to their own
+/// checks); every schema key is present in the result.
 fn check_fixed(
     section: &str,
     node: Option<&Node>,
     specs: &[ParamSpec],
 ) -> Result<BTreeMap<&'static str, Checked>, ConfigError> {
     let mut out = BTreeMap::new();
+    let extra = structured_keys(section);
     if let Some(node) = node {
         for field in as_struct(node, section)? {
             let prefix = format!("{section}.");
+            if extra.contains(&field.key.as_str()) {
+                continue;
+            }
             let Some(spec) = specs.iter().find(|s| s.name == field.key) else {
-                return Err(unknown_key(field, &prefix, specs.iter().map(|s| s.name)));
+                let known = specs.iter().map(|s| s.name).chain(extra.iter().copied());
+                return Err(unknown_key(field, &prefix, known));
             };
             let key = format!("{prefix}{}", field.key);
             let value = check_kind(spec, &field.value, &key, false)?;
@@ -425,14 +452,22 @@ fn fixed_section<'a>(
     Ok(Section { name, values })
 }
 
+/// A registered section as written: its id, the parameters it sets (typed) and the specs they
+/// were checked against.
+struct RegisteredFields {
+    id: String,
+    given: BTreeMap<String, Value>,
+    specs: Vec<ParamSpec>,
+}
+
 /// Checks an `env` or `algorithm` section against the registry's parameter specs.
-fn registered_params(
+fn registered_fields(
     section: &str,
     node: &Node,
     discriminator: &str,
     what: &str,
     specs_of: impl Fn(&str) -> Result<Vec<ParamSpec>, String>,
-) -> Result<(String, Params), ConfigError> {
+) -> Result<RegisteredFields, ConfigError> {
     let fields = as_struct(node, section)?;
     let Some(id_field) = fields.iter().find(|f| f.key == discriminator) else {
         return Err(ConfigError::MissingKey {
@@ -467,14 +502,40 @@ fn registered_params(
             check_kind(spec, &field.value, &key, true)?,
         );
     }
+    Ok(RegisteredFields {
+        id: id.clone(),
+        given,
+        specs,
+    })
+}
+
+/// [`registered_fields`] with the registry's defaults filled in.
+fn registered_params(
+    section: &str,
+    node: &Node,
+    discriminator: &str,
+    what: &str,
+    specs_of: impl Fn(&str) -> Result<Vec<ParamSpec>, String>,
+) -> Result<(String, Params), ConfigError> {
+    let f = registered_fields(section, node, discriminator, what, specs_of)?;
+    let params = resolve(section, what, &f.id, &f.specs, &f.given)?;
+    Ok((f.id, params))
+}
+
+fn resolve(
+    section: &str,
+    what: &str,
+    id: &str,
+    specs: &[ParamSpec],
+    given: &BTreeMap<String, Value>,
+) -> Result<Params, ConfigError> {
     // Only a registry default that fails its own kind can make this fail: a bug in the domain
     // crate, reported rather than hidden.
-    let params = Params::resolve(&specs, &given).map_err(|e| ConfigError::InvalidValue {
+    Params::resolve(specs, given).map_err(|e| ConfigError::InvalidValue {
         location: Location::Default,
         key: section.to_string(),
         reason: format!("{what} `{id}`: {e}"),
-    })?;
-    Ok((id.clone(), params))
+    })
 }
 
 impl Experiment {
@@ -518,16 +579,38 @@ impl Experiment {
             },
         };
 
+        let profile = match by_key.get("profile") {
+            None => None,
+            Some(f) => parse_profile(&f.value, registry)?,
+        };
         let env = match by_key.get("env") {
             None => None,
             Some(f) => {
-                let (id, params) = registered_params("env", &f.value, "id", "environment", |id| {
+                let RegisteredFields {
+                    id,
+                    mut given,
+                    specs,
+                } = registered_fields("env", &f.value, "id", "environment", |id| {
                     registry
                         .env(id)
                         .map(|e| e.params.clone())
                         .map_err(|e| e.to_string())
                 })?;
-                Some(EnvConfig { id, params })
+                // The profile fills in what no layer sets; a layer that sets a switched
+                // parameter itself wins (and the run records the switch as overridden).
+                let profile_switches = match (&profile, registry.env(&id)) {
+                    (Some(p), Ok(entry)) => p.switches_for(entry),
+                    _ => BTreeMap::new(),
+                };
+                for (k, v) in &profile_switches {
+                    given.entry(k.clone()).or_insert_with(|| v.clone());
+                }
+                let params = resolve("env", "environment", &id, &specs, &given)?;
+                Some(EnvConfig {
+                    id,
+                    params,
+                    profile_switches,
+                })
             }
         };
         let algorithm = match by_key.get("algorithm") {
@@ -571,8 +654,22 @@ impl Experiment {
             },
         };
         let g = fixed_section("generalization", &by_key)?;
+        let tasks = match by_key
+            .get("generalization")
+            .and_then(|f| f.value.field("tasks"))
+        {
+            None => None,
+            Some(f) if f.value.value == NodeValue::Null => None,
+            Some(f) => Some(parse_tasks(
+                &f.value,
+                "generalization.tasks",
+                registry,
+                None,
+            )?),
+        };
         let generalization = GeneralizationSettings {
             episodes: g.usize("episodes", 0)?,
+            tasks,
         };
         let m = fixed_section("metrics", &by_key)?;
         let metrics = MetricSettings {
@@ -600,6 +697,7 @@ impl Experiment {
 
         Ok(Self {
             name,
+            profile,
             env,
             algorithm,
             seeds,
@@ -640,6 +738,9 @@ impl Experiment {
     /// (key, value) pairs in schema order.
     fn sections(&self) -> Vec<(&'static str, Rendered)> {
         let mut out = vec![("name", Rendered::Value(Value::Str(self.name.clone())))];
+        if let Some(profile) = &self.profile {
+            out.push(("profile", Rendered::Struct(profile.fields())));
+        }
         if let Some(env) = &self.env {
             let mut fields = vec![("id".to_string(), Value::Str(env.id.clone()))];
             fields.extend(
@@ -699,10 +800,14 @@ impl Experiment {
                 ),
             ]),
         ));
-        out.push((
-            "generalization",
-            Rendered::structure([("episodes", int(self.generalization.episodes as u64))]),
-        ));
+        let mut generalization = vec![(
+            "episodes".to_string(),
+            int(self.generalization.episodes as u64),
+        )];
+        if let Some(tasks) = &self.generalization.tasks {
+            generalization.push(("tasks".to_string(), tasks_to_value(tasks)));
+        }
+        out.push(("generalization", Rendered::Struct(generalization)));
         let m = &self.metrics;
         out.push((
             "metrics",
@@ -773,12 +878,12 @@ impl Experiment {
         for (key, section) in self.sections() {
             match section {
                 Rendered::Value(v) => {
-                    let _ = writeln!(s, "    {key}: {},", ron_value(&v));
+                    let _ = writeln!(s, "    {key}: {},", ron_value_pretty(&v, 4));
                 }
                 Rendered::Struct(fields) => {
                     let _ = writeln!(s, "    {key}: (");
                     for (k, v) in fields {
-                        let _ = writeln!(s, "        {k}: {},", ron_value(&v));
+                        let _ = writeln!(s, "        {k}: {},", ron_value_pretty(&v, 8));
                     }
                     s.push_str("    ),\n");
                 }
@@ -880,6 +985,48 @@ pub(crate) fn ron_value(v: &Value) -> String {
                 .collect();
             format!("{{{}}}", inner.join(", "))
         }
+    }
+}
+
+/// [`ron_value`] with maps, and lists holding maps, spread over indented lines (profiles and
+/// task lists would otherwise make one very long line). `indent` is the column of the line the
+/// value starts on.
+fn ron_value_pretty(v: &Value, indent: usize) -> String {
+    let pad = " ".repeat(indent);
+    let inner = " ".repeat(indent + 4);
+    match v {
+        Value::Map(m) if !m.is_empty() => {
+            // Identifier keys read as a struct `(key: v)`; others (environment ids) need the
+            // map form `{"Id-v0": v}`. Both parse to the same value.
+            let identifiers = m.keys().all(|k| {
+                k.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_')
+                    && k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                    && !["true", "false", "None", "Some", "inf", "NaN"].contains(&k.as_str())
+            });
+            let (open, close) = if identifiers { ('(', ')') } else { ('{', '}') };
+            let mut s = format!("{open}\n");
+            for (k, v) in m {
+                let key = if identifiers {
+                    k.clone()
+                } else {
+                    ron_string(k)
+                };
+                let _ = writeln!(s, "{inner}{key}: {},", ron_value_pretty(v, indent + 4));
+            }
+            s.push_str(&pad);
+            s.push(close);
+            s
+        }
+        Value::List(items) if items.iter().any(|i| matches!(i, Value::Map(_))) => {
+            let mut s = String::from("[\n");
+            for item in items {
+                let _ = writeln!(s, "{inner}{},", ron_value_pretty(item, indent + 4));
+            }
+            s.push_str(&pad);
+            s.push(']');
+            s
+        }
+        _ => ron_value(v),
     }
 }
 

@@ -55,6 +55,7 @@
 mod error;
 mod experiment;
 mod layers;
+mod profile;
 mod syntax;
 
 #[cfg(test)]
@@ -69,6 +70,7 @@ pub use experiment::{
     ReliabilityDefinition, section_schema,
 };
 pub use layers::Override;
+pub use profile::Profile;
 pub use syntax::{Field, Node, NodeValue, parse_str};
 
 use crate::registry::Registry;

@@ -716,6 +716,222 @@ fn errors_expose_key_and_location() {
     );
 }
 
+// ---------------------------------------------------------------- profiles and suites
+
+const PROFILED: &str = r#"(
+    profile: (
+        name: "orig",
+        env: {
+            "test": (noise: 0, difficulty: 3),
+            "Dummy-v0": (mode: "hard"),
+        },
+        generalization: {
+            "test": [
+                (env: "Dummy-v0", params: (size: 2)),
+                (env: "Dummy-v1", name: "hardest", params: {"difficulty": 9}),
+            ],
+        },
+    ),
+    env: (id: "Dummy-v0", size: 6),
+)"#;
+
+#[test]
+fn a_profile_fills_in_unset_parameters_and_records_its_switches() {
+    let exp = load_text(PROFILED, &[]).unwrap();
+    let env = exp.require_env().unwrap();
+    // Domain switches apply where the environment declares the parameter (not `difficulty`),
+    // id switches on top; the int `0` is a float for the float parameter `noise`.
+    assert_eq!(env.params.get("noise"), Some(&Value::Float(0.0)));
+    assert_eq!(env.params.get("mode"), Some(&Value::Str("hard".into())));
+    assert_eq!(env.params.get("size"), Some(&Value::Int(6)));
+    assert_eq!(
+        env.profile_switches,
+        [
+            ("mode".to_string(), Value::Str("hard".into())),
+            ("noise".to_string(), Value::Float(0.0)),
+        ]
+        .into()
+    );
+    let profile = exp.profile.as_ref().unwrap();
+    assert_eq!(profile.name, "orig");
+    let suite = &profile.generalization["test"];
+    assert_eq!(
+        suite.iter().map(|t| t.name.as_str()).collect::<Vec<_>>(),
+        ["Dummy-v0[size=2]", "hardest"]
+    );
+    assert_eq!(suite[1].params["difficulty"], Value::Int(9));
+
+    // A layer that sets a switched parameter wins; the switch stays recorded, so a pipeline can
+    // tell it was overridden.
+    let exp = load_text(PROFILED, &["env.mode=easy"]).unwrap();
+    let env = exp.require_env().unwrap();
+    assert_eq!(env.params.get("mode"), Some(&Value::Str("easy".into())));
+    assert_eq!(env.profile_switches["mode"], Value::Str("hard".into()));
+
+    // Switching to another environment of the domain takes the domain's switches it declares.
+    let exp = load_text(PROFILED, &["env.id=Dummy-v1"]).unwrap();
+    let env = exp.require_env().unwrap();
+    assert_eq!(env.params.get("difficulty"), Some(&Value::Int(3)));
+}
+
+#[test]
+fn a_profile_is_a_name_or_a_struct_and_can_be_dropped_by_a_later_layer() {
+    let exp = load_text(r#"(profile: "orig", env: (id: "Dummy-v0"))"#, &[]).unwrap();
+    assert_eq!(exp.profile.as_ref().unwrap().name, "orig");
+    assert!(exp.require_env().unwrap().profile_switches.is_empty());
+    let exp = load_text(PROFILED, &["profile=None"]).unwrap();
+    assert!(exp.profile.is_none());
+    assert_eq!(
+        exp.require_env().unwrap().params.get("mode"),
+        Some(&Value::Str("easy".into()))
+    );
+    let dir = write_files(&[
+        ("profile.ron", PROFILED),
+        (
+            "exp.ron",
+            r#"(include: ["profile.ron"], env: (size: 3), seeds: [1])"#,
+        ),
+    ]);
+    let exp = load(&dir.path().join("exp.ron"), &[], &registry()).unwrap();
+    assert_eq!(exp.profile.as_ref().unwrap().name, "orig");
+    assert_eq!(
+        exp.require_env().unwrap().params.get("mode"),
+        Some(&Value::Str("hard".into()))
+    );
+}
+
+#[test]
+fn profiles_and_suites_round_trip_through_the_operative_config() {
+    for overrides in [
+        &[][..],
+        &["generalization.tasks=[(env: \"Dummy-v1\", params: (difficulty: 2))]"][..],
+        &[
+            "env.noise=0.5",
+            "profile.env={\"Dummy-v1\": (difficulty: 4)}",
+        ][..],
+    ] {
+        let exp = load_text(PROFILED, overrides).unwrap();
+        let text = exp.to_ron_string();
+        assert!(
+            text.contains("    profile: (\n        name: \"orig\",\n"),
+            "{text}"
+        );
+        let again = load_str(&text, Path::new("operative_config.ron"), &[], &registry())
+            .unwrap_or_else(|e| panic!("{e}\n{text}"));
+        assert_eq!(again, exp, "{text}");
+        assert_eq!(again.to_ron_string(), text);
+    }
+}
+
+#[test]
+fn a_config_lists_its_own_generalization_suite() {
+    let exp = load_text(
+        r#"(env: (id: "Dummy-v0"), generalization: (episodes: 3, tasks: [
+            (env: "Dummy-v0", name: "small", params: (size: 1, mode: "hard")),
+            (env: "Dummy-v1"),
+        ]))"#,
+        &[],
+    )
+    .unwrap();
+    let tasks = exp.generalization.tasks.as_ref().unwrap();
+    assert_eq!(exp.generalization.episodes, 3);
+    assert_eq!(
+        tasks
+            .iter()
+            .map(|t| (t.name.as_str(), t.env_id.as_str()))
+            .collect::<Vec<_>>(),
+        [("small", "Dummy-v0"), ("Dummy-v1", "Dummy-v1")]
+    );
+    assert_eq!(tasks[0].params["mode"], Value::Str("hard".into()));
+    assert!(load_text(FULL, &[]).unwrap().generalization.tasks.is_none());
+}
+
+#[test]
+fn bad_profiles_and_suites_name_the_key_and_the_problem() {
+    let cases: [(&str, &[&str], &str); 11] = [
+        (
+            r#"(profile: (env: {}))"#,
+            &[],
+            "exp.ron:1:11: missing key `profile.name`",
+        ),
+        (
+            r#"(profile: (name: "p", envs: {}))"#,
+            &[],
+            "exp.ron:1:23: unknown key `profile.envs` (did you mean `env`?)",
+        ),
+        (
+            r#"(profile: 3)"#,
+            &[],
+            "exp.ron:1:11: `profile`: expected a name",
+        ),
+        (
+            r#"(profile: (name: "p", env: {"tesst": (size: 1)}))"#,
+            &[],
+            "exp.ron:1:29: `profile.env.tesst`: `tesst` is neither a registered domain nor an environment id (did you mean `test`?)",
+        ),
+        (
+            r#"(profile: (name: "p", env: {"test": (sise: 1)}))"#,
+            &[],
+            "exp.ron:1:38: unknown key `profile.env.test.sise` (did you mean `size`?)",
+        ),
+        (
+            r#"(profile: (name: "p", env: {"Dummy-v1": (size: 1)}))"#,
+            &[],
+            "unknown key `profile.env.Dummy-v1.size`; known keys: `difficulty`",
+        ),
+        (
+            r#"(profile: (name: "p", env: {"test": (mode: "medium")}))"#,
+            &[],
+            "`profile.env.test.mode`: `medium` is not one of easy, hard",
+        ),
+        (
+            r#"(profile: (name: "p", generalization: {"test": []}))"#,
+            &[],
+            "`profile.generalization.test`: a generalization suite needs at least one task",
+        ),
+        (
+            r#"(generalization: (tasks: [(env: "Dummy-v0"), (env: "Dummy-v0")]))"#,
+            &[],
+            "`generalization.tasks[1]`: task name `Dummy-v0` is listed twice",
+        ),
+        (
+            r#"(generalization: (tasks: [(env: "Dumy-v0")]))"#,
+            &[],
+            "`generalization.tasks[0].env`: unknown environment `Dumy-v0` (did you mean `Dummy-v0`?)",
+        ),
+        (
+            r#"(generalization: (tasks: [(env: "Dummy-v0", params: (size: "big"))]))"#,
+            &[],
+            "`generalization.tasks[0].params.size`: expected integer, found string",
+        ),
+    ];
+    for (text, overrides, expected) in cases {
+        let err = err_text(text, overrides);
+        assert!(
+            err.contains(expected),
+            "{text}\n got: {err}\nwant: {expected}"
+        );
+    }
+    // A profile's suite for a domain must hold that domain's environments.
+    let mut reg = registry();
+    let mut other = reg.env("Dummy-v1").unwrap().clone();
+    other.id = "Other-v0".into();
+    other.domain = "other".into();
+    reg.register_env(other);
+    let err = load_str(
+        r#"(profile: (name: "p", generalization: {"test": [(env: "Other-v0")]}))"#,
+        Path::new("exp.ron"),
+        &[],
+        &reg,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("`Other-v0` belongs to domain `other`, not `test`"),
+        "{err}"
+    );
+}
+
 // ---------------------------------------------------------------- properties
 
 /// Keys the merge-order property sets, with a value generator each (all integers, so a layer's
@@ -902,10 +1118,12 @@ proptest! {
         via_override in any::<bool>(),
     ) {
         let known: Vec<String> = match section {
-            "" => ["name", "env", "algorithm", "seeds", "training", "inference",
+            "" => ["name", "profile", "env", "algorithm", "seeds", "training", "inference",
                    "generalization", "metrics", "output", "include"].map(String::from).to_vec(),
             "env" => ["id", "size", "noise", "mode", "layout"].map(String::from).to_vec(),
             "algorithm" => ["name", "learning_rate", "hidden", "use_gae", "clip"].map(String::from).to_vec(),
+            // `generalization.tasks` is a list of structs, checked outside the flat schema.
+            "generalization" => ["episodes", "tasks"].map(String::from).to_vec(),
             s => section_schema(s).unwrap().iter().map(|p| p.name.to_string()).collect(),
         };
         prop_assume!(!known.contains(&key));

@@ -21,8 +21,11 @@ use super::{
 };
 
 pub mod leaderboard;
+pub mod paper;
 pub mod render;
 pub mod svg;
+
+use super::plan::{GeneralizationSuite, ProfileRecord, SuiteSource};
 
 /// The four metric families of the paper (system split into training and inference).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
@@ -231,6 +234,124 @@ pub struct Report {
     pub skipped_runs: Vec<(String, String)>,
     /// Bootstrap repetitions used for every interval.
     pub bootstrap_reps: usize,
+    /// Per task table: the profiles and generalization suites its runs used (absent in
+    /// reports written before profiles existed).
+    #[serde(default)]
+    pub settings: Vec<TableSettings>,
+    /// The paper's figures beside the tables that match a paper task (`--paper`).
+    #[serde(default)]
+    pub paper: Vec<paper::PaperComparison>,
+}
+
+impl Report {
+    /// The settings of task table `task`.
+    pub fn settings_of(&self, task: &str) -> Option<&TableSettings> {
+        self.settings.iter().find(|s| s.task == task)
+    }
+
+    /// The paper comparison of task table `task`.
+    pub fn paper_of(&self, task: &str) -> Option<&paper::PaperComparison> {
+        self.paper.iter().find(|p| p.task == task)
+    }
+}
+
+/// What a task table's runs were run with: the profile (and its switches) and the
+/// generalization suite. More than one of either means the table mixes settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TableSettings {
+    /// Task.
+    pub task: String,
+    /// Each distinct profile, with the algorithms whose runs used it.
+    pub profiles: Vec<ProfileUse>,
+    /// Each distinct generalization suite, with the algorithms whose runs used it.
+    pub suites: Vec<SuiteUse>,
+}
+
+/// A profile used by runs of a table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProfileUse {
+    /// The profile with its switches; `None`: no profile (the corrected defaults).
+    pub profile: Option<ProfileRecord>,
+    /// Algorithms (table columns) whose runs used it.
+    pub algorithms: Vec<String>,
+}
+
+/// A generalization suite used by runs of a table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SuiteUse {
+    /// Where it came from; `None`: not recorded (older runs, which used the registry's suite
+    /// at `generalize` time).
+    pub source: Option<SuiteSource>,
+    /// Its task names, in order (empty when not recorded).
+    pub tasks: Vec<String>,
+    /// Algorithms (table columns) whose runs used it.
+    pub algorithms: Vec<String>,
+}
+
+impl TableSettings {
+    /// Whether runs with different profiles (or different switches of one profile) share the
+    /// table.
+    pub fn mixed_profiles(&self) -> bool {
+        self.profiles.len() > 1
+    }
+
+    /// Whether runs with different generalization suites share the table (their
+    /// generalization sums are over different tasks).
+    pub fn mixed_suites(&self) -> bool {
+        self.suites.len() > 1
+    }
+}
+
+fn table_settings(groups: &[Group]) -> Vec<TableSettings> {
+    let mut out: Vec<TableSettings> = Vec::new();
+    for g in groups {
+        let i = match out.iter().position(|t| t.task == g.task) {
+            Some(i) => i,
+            None => {
+                out.push(TableSettings {
+                    task: g.task.clone(),
+                    profiles: Vec::new(),
+                    suites: Vec::new(),
+                });
+                out.len() - 1
+            }
+        };
+        let table = &mut out[i];
+        let add = |algos: &mut Vec<String>| {
+            if !algos.contains(&g.algorithm) {
+                algos.push(g.algorithm.clone());
+            }
+        };
+        for r in &g.runs {
+            let record = &r.run.record;
+            let profile = record.task.profile.clone();
+            match table.profiles.iter_mut().find(|u| u.profile == profile) {
+                Some(u) => add(&mut u.algorithms),
+                None => table.profiles.push(ProfileUse {
+                    profile,
+                    algorithms: vec![g.algorithm.clone()],
+                }),
+            }
+            let suite = record.generalization.suite.as_ref();
+            let source = suite.map(|s: &GeneralizationSuite| s.source);
+            let tasks: Vec<String> = suite
+                .map(|s| s.tasks.iter().map(|t| t.name.clone()).collect())
+                .unwrap_or_default();
+            match table
+                .suites
+                .iter_mut()
+                .find(|u| u.source == source && u.tasks == tasks)
+            {
+                Some(u) => add(&mut u.algorithms),
+                None => table.suites.push(SuiteUse {
+                    source,
+                    tasks,
+                    algorithms: vec![g.algorithm.clone()],
+                }),
+            }
+        }
+    }
+    out
 }
 
 /// Options of [`build_report`].
@@ -1021,19 +1142,32 @@ fn comparisons(
 
 /// Computes the report of the runs below `dirs`.
 pub fn build_report(dirs: &[PathBuf], opts: &ReportOptions) -> Result<(Report, Vec<Group>)> {
+    build_report_with_paper(dirs, opts, None)
+}
+
+/// [`build_report`], with the paper's figures beside every table that matches a task of
+/// `paper` (see [`paper`]).
+pub fn build_report_with_paper(
+    dirs: &[PathBuf],
+    opts: &ReportOptions,
+    paper: Option<&paper::PaperTables>,
+) -> Result<(Report, Vec<Group>)> {
     let (groups, skipped) = load_groups(dirs)?;
     let reports: Vec<GroupReport> = groups.iter().map(|g| group_report(g, opts)).collect();
     let (iqm, poi) = comparisons(&reports, opts);
-    Ok((
-        Report {
-            groups: reports,
-            iqm,
-            probability_of_improvement: poi,
-            skipped_runs: skipped,
-            bootstrap_reps: opts.bootstrap_reps,
-        },
-        groups,
-    ))
+    let mut report = Report {
+        groups: reports,
+        iqm,
+        probability_of_improvement: poi,
+        skipped_runs: skipped,
+        bootstrap_reps: opts.bootstrap_reps,
+        settings: table_settings(&groups),
+        paper: Vec::new(),
+    };
+    if let Some(tables) = paper {
+        report.paper = paper::compare(&report, &groups, tables);
+    }
+    Ok((report, groups))
 }
 
 /// Builds the report and writes every output into `out`: `report.md`, `report.tex`,
@@ -1041,7 +1175,18 @@ pub fn build_report(dirs: &[PathBuf], opts: &ReportOptions) -> Result<(Report, V
 /// of `a2perf metrics reliability` and `a2perf metrics iqm`) and
 /// `plots/{radar,curves}_<task>.svg`.
 pub fn write_report(dirs: &[PathBuf], out: &Path, opts: &ReportOptions) -> Result<Report> {
-    let (report, groups) = build_report(dirs, opts)?;
+    write_report_with_paper(dirs, out, opts, None)
+}
+
+/// [`write_report`], with the paper's figures beside every table that matches a task of
+/// `paper`; `paper_comparison.csv` lists them one row per (task, algorithm, metric).
+pub fn write_report_with_paper(
+    dirs: &[PathBuf],
+    out: &Path,
+    opts: &ReportOptions,
+    paper: Option<&paper::PaperTables>,
+) -> Result<Report> {
+    let (report, groups) = build_report_with_paper(dirs, opts, paper)?;
     std::fs::create_dir_all(out.join("plots")).map_err(io_err(out))?;
     let write = |name: &str, text: &str| -> Result<()> {
         let p = out.join(name);
@@ -1052,6 +1197,9 @@ pub fn write_report(dirs: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resul
     write("metrics.csv", &render::csv(&report))?;
     write("curves.csv", &render::curves_csv(&groups))?;
     write("scores.csv", &render::scores_csv(&report))?;
+    if paper.is_some() {
+        write("paper_comparison.csv", &render::paper_csv(&report))?;
+    }
     a2perf_core::write_json_atomic(&out.join("report.json"), &report)?;
     a2perf_core::write_json_atomic(
         &out.join("leaderboard.json"),

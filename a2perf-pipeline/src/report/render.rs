@@ -3,7 +3,8 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
-use super::{Category, Group, GroupReport, MetricValue, Report};
+use super::paper::{PaperCell, PaperComparison, RATIO_METRICS};
+use super::{Category, Group, GroupReport, MetricValue, Report, TableSettings};
 
 /// The original's number format: two decimals, or scientific notation below 0.01.
 ///
@@ -20,6 +21,25 @@ pub fn format_value(v: f64) -> String {
     } else {
         // `-0.00` would suggest a sign the value does not have.
         format!("{:.2}", if v == 0.0 { 0.0 } else { v })
+    }
+}
+
+/// A ratio to three significant digits (scientific notation far from 1).
+///
+/// ```
+/// use a2perf_pipeline::report::render::format_ratio;
+/// assert_eq!(format_ratio(0.026579), "0.0266");
+/// assert_eq!(format_ratio(1.0), "1.00");
+/// assert_eq!(format_ratio(123.456), "123");
+/// assert_eq!(format_ratio(6.38e-4), "6.38e-4");
+/// ```
+pub fn format_ratio(r: f64) -> String {
+    let a = r.abs();
+    if r == 0.0 || !(1e-3..1e3).contains(&a) {
+        format!("{r:.2e}")
+    } else {
+        let decimals = (2 - a.log10().floor() as i32).max(0) as usize;
+        format!("{r:.decimals$}")
     }
 }
 
@@ -49,6 +69,157 @@ fn cell(m: &MetricValue, latex: bool) -> String {
             s
         }
     }
+}
+
+fn paper_cell(c: Option<&PaperCell>, latex: bool) -> String {
+    let missing = if latex { "--" } else { "—" };
+    match c.and_then(|c| c.mean.map(|m| (m, c.std))) {
+        None => missing.into(),
+        Some((mean, std)) => {
+            let pm = if latex { " \\pm " } else { " ± " };
+            let mut s = format_value(mean);
+            if let Some(sd) = std {
+                s.push_str(pm);
+                s.push_str(&format_value(sd));
+            }
+            if latex { format!("${s}$") } else { s }
+        }
+    }
+}
+
+/// One line naming a profile and every switch it gives the task's environment.
+fn describe_profile(p: Option<&super::ProfileRecord>) -> String {
+    match p {
+        None => "none (corrected defaults)".into(),
+        Some(p) if p.switches.is_empty() => {
+            format!("{} (no environment switches for this task)", p.name)
+        }
+        Some(p) => format!(
+            "{} — {}",
+            p.name,
+            p.switches
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+/// `from <source>: <tasks>`.
+fn describe_suite(u: &super::SuiteUse) -> String {
+    match u.source {
+        None => "the domain's registry default (not recorded by these runs)".into(),
+        Some(source) => format!("from {}: {}", source.label(), u.tasks.join(", ")),
+    }
+}
+
+fn upper(algos: &[String]) -> String {
+    algos
+        .iter()
+        .map(|a| a.to_uppercase())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The profile and generalization-suite lines printed under a table's heading.
+fn settings_lines(t: &TableSettings) -> Vec<String> {
+    let mut out = Vec::new();
+    if t.mixed_profiles() {
+        let parts: Vec<String> = t
+            .profiles
+            .iter()
+            .map(|u| {
+                format!(
+                    "{}: {}",
+                    upper(&u.algorithms),
+                    describe_profile(u.profile.as_ref())
+                )
+            })
+            .collect();
+        out.push(format!(
+            "**Mixed profiles in this table** (its columns ran under different environment \
+             semantics): {}",
+            parts.join("; ")
+        ));
+    } else if let Some(u) = t.profiles.first() {
+        out.push(format!("Profile: {}", describe_profile(u.profile.as_ref())));
+    }
+    if t.mixed_suites() {
+        let parts: Vec<String> = t
+            .suites
+            .iter()
+            .map(|u| format!("{}: {}", upper(&u.algorithms), describe_suite(u)))
+            .collect();
+        out.push(format!(
+            "**Mixed generalization suites in this table** (its generalization sums are over \
+             different tasks): {}",
+            parts.join("; ")
+        ));
+    } else if let Some(u) = t.suites.first() {
+        out.push(format!("Generalization suite: {}", describe_suite(u)));
+    }
+    out
+}
+
+/// Where the paper's column of a table comes from.
+fn paper_heading(p: &PaperComparison) -> String {
+    format!(
+        "{}{} ({}; paper task `{}`)",
+        p.paper_title,
+        p.table
+            .as_ref()
+            .map(|t| format!(", {t}"))
+            .unwrap_or_default(),
+        p.version,
+        p.paper_task
+    )
+}
+
+/// Notes on the paper's column: sources, conversions and missing values.
+fn paper_notes(p: &PaperComparison) -> Vec<String> {
+    let mut notes = Vec::new();
+    for col in &p.columns {
+        if !col.in_paper {
+            notes.push(format!(
+                "{} (paper): the paper does not report this algorithm on this task",
+                col.algorithm
+            ));
+        }
+        for c in &col.cells {
+            let mut parts = Vec::new();
+            match (c.mean, &c.source) {
+                (Some(_), Some(src)) => parts.push(src.clone()),
+                (None, _) => parts.push("no paper value".into()),
+                _ => {}
+            }
+            if let Some(p) = &c.published {
+                parts.push(format!("published {p}"));
+            }
+            if let Some(conv) = &c.conversion {
+                parts.push(conv.clone());
+            }
+            if let Some(n) = &c.note {
+                parts.push(n.clone());
+            }
+            notes.push(format!(
+                "{} (paper) / {}: {}",
+                col.algorithm,
+                c.key,
+                parts.join("; ")
+            ));
+        }
+    }
+    if !p.not_run.is_empty() {
+        notes.push(format!(
+            "the paper also reports {} on this task (not run here)",
+            upper(&p.not_run)
+        ));
+    }
+    if let Some(n) = &p.note {
+        notes.push(format!("paper task: {n}"));
+    }
+    notes
 }
 
 fn tasks(report: &Report) -> Vec<&str> {
@@ -87,7 +258,20 @@ pub fn markdown(report: &Report) -> String {
     for task in tasks(report) {
         let groups: Vec<&GroupReport> = report.groups.iter().filter(|g| g.task == task).collect();
         let first = groups[0];
+        let paper = report.paper_of(task);
         let _ = writeln!(s, "## {task} (`{}`, {})\n", first.env_id, first.domain);
+        if let Some(t) = report.settings_of(task) {
+            for line in settings_lines(t) {
+                let _ = writeln!(s, "{line}\n");
+            }
+        }
+        if let Some(p) = paper {
+            let _ = writeln!(
+                s,
+                "Paper columns: {}, in our units (conversions in the notes).\n",
+                paper_heading(p)
+            );
+        }
         let _ = write!(s, "| Category | Metric | ");
         for g in &groups {
             let _ = write!(
@@ -96,19 +280,34 @@ pub fn markdown(report: &Report) -> String {
                 g.algorithm.to_uppercase(),
                 g.seeds.len()
             );
+            if paper.is_some() {
+                let _ = write!(s, "{} (paper) | ", g.algorithm.to_uppercase());
+            }
         }
         let _ = writeln!(s);
-        let _ = writeln!(s, "|---|---|{}", "---|".repeat(groups.len()));
+        let columns = groups.len() * if paper.is_some() { 2 } else { 1 };
+        let _ = writeln!(s, "|---|---|{}", "---|".repeat(columns));
         for (cat, key, label, unit, higher) in rows(&groups) {
             let arrow = if higher { "↑" } else { "↓" };
             let _ = write!(s, "| {} | {label} ({unit}) {arrow} | ", cat.label());
             for g in &groups {
                 let c = g.metric(key).map_or_else(|| "—".into(), |m| cell(m, false));
                 let _ = write!(s, "{c} | ");
+                if let Some(p) = paper {
+                    let pc = p
+                        .columns
+                        .iter()
+                        .find(|c| c.algorithm == g.algorithm)
+                        .and_then(|c| c.cell(key));
+                    let _ = write!(s, "{} | ", paper_cell(pc, false));
+                }
             }
             let _ = writeln!(s);
         }
         let _ = writeln!(s);
+        if let Some(p) = paper {
+            ratio_table_md(&mut s, &groups, p);
+        }
         let mut notes = Vec::new();
         for g in &groups {
             for m in &g.metrics {
@@ -116,6 +315,9 @@ pub fn markdown(report: &Report) -> String {
                     notes.push(format!("- {} / {}: {}", g.algorithm, m.key, n));
                 }
             }
+        }
+        if let Some(p) = paper {
+            notes.extend(paper_notes(p).into_iter().map(|n| format!("- {n}")));
         }
         if !notes.is_empty() {
             let _ = writeln!(
@@ -174,6 +376,55 @@ pub fn markdown(report: &Report) -> String {
     s
 }
 
+/// The ratio rows (energy, RAM, wall-clock time) of a table with a paper column.
+fn ratio_rows<'a>(
+    groups: &[&'a GroupReport],
+    p: &PaperComparison,
+) -> Vec<(&'a MetricValue, Vec<Option<f64>>)> {
+    let Some(first) = groups.first() else {
+        return Vec::new();
+    };
+    first
+        .metrics
+        .iter()
+        .filter(|m| RATIO_METRICS.contains(&m.key.as_str()))
+        .map(|m| {
+            let ratios = groups
+                .iter()
+                .map(|g| {
+                    p.columns
+                        .iter()
+                        .find(|c| c.algorithm == g.algorithm)
+                        .and_then(|c| c.cell(&m.key))
+                        .and_then(|c| c.ratio)
+                })
+                .collect();
+            (m, ratios)
+        })
+        .collect()
+}
+
+fn ratio_table_md(s: &mut String, groups: &[&GroupReport], p: &PaperComparison) {
+    let _ = writeln!(
+        s,
+        "Ours / paper (energy, RAM, wall-clock; 1 = the same, below 1 = less):\n"
+    );
+    let _ = write!(s, "| Category | Metric | ");
+    for g in groups {
+        let _ = write!(s, "{} | ", g.algorithm.to_uppercase());
+    }
+    let _ = writeln!(s);
+    let _ = writeln!(s, "|---|---|{}", "---|".repeat(groups.len()));
+    for (m, ratios) in ratio_rows(groups, p) {
+        let _ = write!(s, "| {} | {} ({}) | ", m.category.label(), m.label, m.unit);
+        for r in ratios {
+            let _ = write!(s, "{} | ", r.map_or_else(|| "—".into(), format_ratio));
+        }
+        let _ = writeln!(s);
+    }
+    let _ = writeln!(s);
+}
+
 fn tex_escape(t: &str) -> String {
     let mut out = String::with_capacity(t.len());
     for c in t.chars() {
@@ -197,11 +448,13 @@ pub fn latex(report: &Report) -> String {
     let mut s = String::from("% Generated by `a2perf report`. Requires \\usepackage{booktabs}.\n");
     for task in tasks(report) {
         let groups: Vec<&GroupReport> = report.groups.iter().filter(|g| g.task == task).collect();
+        let paper = report.paper_of(task);
+        let per_group = if paper.is_some() { 2 } else { 1 };
         let _ = writeln!(s, "\\begin{{table}}[t]\n\\centering\n\\small");
         let _ = writeln!(
             s,
             "\\begin{{tabular}}{{ll{}}}\n\\toprule",
-            "c".repeat(groups.len())
+            "c".repeat(groups.len() * per_group)
         );
         let _ = write!(s, "Category & Metric (unit)");
         for g in &groups {
@@ -210,6 +463,13 @@ pub fn latex(report: &Report) -> String {
                 " & \\textbf{{{}}}",
                 tex_escape(&g.algorithm.to_uppercase())
             );
+            if paper.is_some() {
+                let _ = write!(
+                    s,
+                    " & \\textbf{{{}}} (paper)",
+                    tex_escape(&g.algorithm.to_uppercase())
+                );
+            }
         }
         let _ = writeln!(s, " \\\\\n\\midrule");
         let mut last = None;
@@ -233,16 +493,98 @@ pub fn latex(report: &Report) -> String {
             for g in &groups {
                 let c = g.metric(key).map_or_else(|| "--".into(), |m| cell(m, true));
                 let _ = write!(s, " & {c}");
+                if let Some(p) = paper {
+                    let pc = p
+                        .columns
+                        .iter()
+                        .find(|c| c.algorithm == g.algorithm)
+                        .and_then(|c| c.cell(key));
+                    let _ = write!(s, " & {}", paper_cell(pc, true));
+                }
             }
             let _ = writeln!(s, " \\\\");
         }
+        if let Some(p) = paper {
+            let _ = writeln!(
+                s,
+                "\\midrule\n\\multicolumn{{{}}}{{l}}{{Ours / paper}} \\\\",
+                2 + groups.len() * per_group
+            );
+            for (m, ratios) in ratio_rows(&groups, p) {
+                let _ = write!(
+                    s,
+                    "{} & {} ({})",
+                    tex_escape(m.category.label()),
+                    tex_escape(&m.label),
+                    tex_escape(&m.unit)
+                );
+                for r in ratios {
+                    let v = r.map_or_else(|| "--".into(), |r| format!("${}$", format_ratio(r)));
+                    // The ratio sits in the paper column of its algorithm.
+                    let _ = write!(s, " & & {v}");
+                }
+                let _ = writeln!(s, " \\\\");
+            }
+        }
         let _ = writeln!(s, "\\bottomrule\n\\end{{tabular}}");
+        let mut caption = format!(
+            "Metrics for {} (mean $\\pm$ std over seeds).",
+            tex_escape(task)
+        );
+        if let Some(t) = report.settings_of(task) {
+            for line in settings_lines(t) {
+                let _ = write!(caption, " {}.", tex_escape(&line.replace("**", "")));
+            }
+        }
+        if let Some(p) = paper {
+            let _ = write!(
+                caption,
+                " Paper columns: {}, in our units.",
+                tex_escape(&paper_heading(p))
+            );
+        }
         let _ = writeln!(
             s,
-            "\\caption{{Metrics for {} (mean $\\pm$ std over seeds).}}\n\\label{{tab:metrics-{}}}\n\\end{{table}}\n",
-            tex_escape(task),
+            "\\caption{{{caption}}}\n\\label{{tab:metrics-{}}}\n\\end{{table}}\n",
             super::super::plan::path_safe(task)
         );
+    }
+    s
+}
+
+/// The paper comparison, one row per (task, algorithm, metric) the paper gives:
+/// `paper_comparison.csv`.
+pub fn paper_csv(report: &Report) -> String {
+    let mut s = String::from(
+        "task,paper_task,algorithm,metric,unit,ours_mean,paper_mean,paper_std,ratio_ours_over_paper,published,conversion,source,note\n",
+    );
+    for p in &report.paper {
+        for col in &p.columns {
+            let ours = report
+                .groups
+                .iter()
+                .find(|g| g.task == p.task && g.algorithm == col.algorithm);
+            for c in &col.cells {
+                let mean = ours.and_then(|g| g.metric(&c.key)).and_then(|m| m.mean);
+                let _ = writeln!(
+                    s,
+                    "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    csv_field(&p.task),
+                    csv_field(&p.paper_task),
+                    csv_field(&col.algorithm),
+                    c.key,
+                    csv_field(&c.unit),
+                    opt(mean),
+                    opt(c.mean),
+                    opt(c.std),
+                    opt(c.ratio),
+                    csv_field(c.published.as_deref().unwrap_or("")),
+                    csv_field(c.conversion.as_deref().unwrap_or("")),
+                    csv_field(c.source.as_deref().unwrap_or("")),
+                    csv_field(c.note.as_deref().unwrap_or("")),
+                );
+            }
+        }
     }
     s
 }

@@ -54,6 +54,7 @@ pub fn plan(out: &Path, name: &str, seeds: Vec<u64>) -> ExperimentPlan {
             name: "Corridor-v0".into(),
             env_id: "Corridor-v0".into(),
             env_params: BTreeMap::new(),
+            profile: None,
         },
         AlgorithmSpec {
             name: "random_search".into(),
