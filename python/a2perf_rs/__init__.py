@@ -12,7 +12,7 @@
 The import name is ``a2perf_rs`` so that the original ``a2perf`` package can be installed beside it.
 """
 
-from . import _native
+from . import _native, circuit, metrics
 from ._native import BackendError
 from .envs import A2PerfEnv, env_ids, env_params, register_all
 from .vector import A2PerfVectorEnv
@@ -23,6 +23,8 @@ __all__ = [
     "A2PerfEnv",
     "A2PerfVectorEnv",
     "BackendError",
+    "circuit",
+    "metrics",
     "chromium_unavailable_reason",
     "env_ids",
     "env_params",

@@ -34,6 +34,7 @@ import numpy as np
 
 from . import _native
 from .spaces import to_gymnasium
+from .vector import A2PerfVectorEnv
 
 NAMESPACE = "a2perf"
 
@@ -126,15 +127,6 @@ def env_ids() -> list[str]:
     return [f"{NAMESPACE}/{entry[0]}" for entry in _native.env_entries()]
 
 
-def _make_vector(env_id: str):  # noqa: ANN202 - a factory of factories
-    def make(num_envs: int = 1, **kwargs: Any):  # noqa: ANN202
-        from .vector import A2PerfVectorEnv
-
-        return A2PerfVectorEnv(env_id, num_envs=num_envs, **kwargs)
-
-    return make
-
-
 def register_all() -> None:
     """Registers every benchmark environment in Gymnasium's ``a2perf`` namespace (idempotent)."""
     for entry_id, _domain, _summary, _params in _native.env_entries():
@@ -144,7 +136,7 @@ def register_all() -> None:
         gym.register(
             id=full,
             entry_point=A2PerfEnv,
-            vector_entry_point=_make_vector(entry_id),
+            vector_entry_point=A2PerfVectorEnv,
             kwargs={"env_id": entry_id},
             # Episode limits depend on parameters (web `step_limit`, circuit macros, locomotion
             # `episode_steps`); the environments truncate themselves at their spec's limit.

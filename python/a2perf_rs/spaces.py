@@ -23,5 +23,6 @@ def to_gymnasium(desc: tuple[Any, ...]) -> spaces.Space[Any]:
     if kind == "discrete":
         return spaces.Discrete(int(desc[1]))
     if kind == "dict":
-        return spaces.Dict({name: to_gymnasium(sub) for name, sub in desc[1]})
+        # A sequence keeps the Rust key order (a plain dict would be sorted by Gymnasium).
+        return spaces.Dict([(name, to_gymnasium(sub)) for name, sub in desc[1]])
     raise ValueError(f"unknown space kind {kind!r}")
