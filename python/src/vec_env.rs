@@ -289,7 +289,7 @@ impl PyVecEnv {
             }
             let ended: Vec<bool> = st.slots.iter().map(|s| s.ended).collect();
             let as_objects = |l: Bound<'py, PyList>| -> PyResult<Bound<'py, PyAny>> {
-                let arr = np.call_method1("empty", (n, np.getattr("object")?))?;
+                let arr = np.call_method1("empty", (n, py.import("builtins")?.getattr("object")?))?;
                 for (i, x) in l.iter().enumerate() {
                     arr.set_item(i, x)?;
                 }

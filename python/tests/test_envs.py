@@ -150,7 +150,6 @@ def test_illegal_actions_terminate_by_default_or_raise() -> None:
 def test_a_circuit_episode_ends_with_the_proxy_cost() -> None:
     env = A2PerfEnv("CircuitTraining-Synthetic-Small-v0", std_cell_placer="none")
     obs, info = env.reset(seed=1)
-    rng = np.random.default_rng(1)
     total, terminated = 0.0, False
     while not terminated:
         obs, reward, terminated, truncated, info = env.step(
@@ -158,7 +157,6 @@ def test_a_circuit_episode_ends_with_the_proxy_cost() -> None:
         )
         total += reward
     assert info["proxy"] > 0 and total == pytest.approx(-info["proxy"])
-    del rng
 
 
 def _children() -> set[int]:
