@@ -118,7 +118,9 @@ fn finite(what: &str, v: f64) -> PyResult<f64> {
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(PyValueError::new_err(format!("{what} must be finite, got {v}")))
+        Err(PyValueError::new_err(format!(
+            "{what} must be finite, got {v}"
+        )))
     }
 }
 
@@ -126,7 +128,9 @@ fn positive(what: &str, v: f64) -> PyResult<f64> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(PyValueError::new_err(format!("{what} must be positive, got {v}")))
+        Err(PyValueError::new_err(format!(
+            "{what} must be positive, got {v}"
+        )))
     }
 }
 
@@ -145,9 +149,9 @@ pub struct PyPlacementCost {
 
 impl PyPlacementCost {
     fn state(&self) -> PyResult<MutexGuard<'_, CostState>> {
-        self.state
-            .lock()
-            .map_err(|_| PyRuntimeError::new_err("the placement cost is unusable after an earlier failure"))
+        self.state.lock().map_err(|_| {
+            PyRuntimeError::new_err("the placement cost is unusable after an earlier failure")
+        })
     }
 
     fn with<T>(&self, what: &str, f: impl FnOnce(&mut CostState) -> PyResult<T>) -> PyResult<T> {
@@ -382,14 +386,16 @@ impl PyPlacementCost {
         let text = self.with("save_placement", |s| {
             Ok(s.fresh()?.to_placement(Vec::new()).to_text())
         })?;
-        std::fs::write(&path, text).map_err(|e| {
-            pyo3::exceptions::PyOSError::new_err(format!("{}: {e}", path.display()))
-        })
+        std::fs::write(&path, text)
+            .map_err(|e| pyo3::exceptions::PyOSError::new_err(format!("{}: {e}", path.display())))
     }
 
     /// Sets the canvas size (µm).
     fn set_canvas_size(&self, width: f64, height: f64) -> PyResult<()> {
-        let (w, h) = (positive("canvas width", width)?, positive("canvas height", height)?);
+        let (w, h) = (
+            positive("canvas width", width)?,
+            positive("canvas height", height)?,
+        );
         self.with("set_canvas_size", |s| {
             s.set(|c| {
                 c.canvas_width = w;
@@ -479,7 +485,9 @@ impl PyPlacementCost {
 
     /// Congestion smoothing range.
     fn get_congestion_smooth_range(&self) -> PyResult<f64> {
-        self.with("get_congestion_smooth_range", |s| Ok(s.settings.smooth_range))
+        self.with("get_congestion_smooth_range", |s| {
+            Ok(s.settings.smooth_range)
+        })
     }
 
     /// Every setting in force, as the CLI's JSON `settings`.
@@ -567,7 +575,9 @@ impl PyPlacementCost {
         &self,
         py: Python<'py>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let v = self.with("congestion", |s| Ok(s.fresh()?.congestion_maps().0.to_vec()))?;
+        let v = self.with("congestion", |s| {
+            Ok(s.fresh()?.congestion_maps().0.to_vec())
+        })?;
         Ok(PyArray1::from_vec(py, v))
     }
 
@@ -576,7 +586,9 @@ impl PyPlacementCost {
         &self,
         py: Python<'py>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let v = self.with("congestion", |s| Ok(s.fresh()?.congestion_maps().1.to_vec()))?;
+        let v = self.with("congestion", |s| {
+            Ok(s.fresh()?.congestion_maps().1.to_vec())
+        })?;
         Ok(PyArray1::from_vec(py, v))
     }
 

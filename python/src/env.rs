@@ -165,9 +165,14 @@ impl ObsLayout {
     pub fn to_py<'py>(&self, py: Python<'py>, obs: &Observation) -> PyResult<Bound<'py, PyAny>> {
         self.check(obs)?;
         let array = |i: usize| -> PyResult<Bound<'py, PyAny>> {
-            Ok(PyArray1::from_slice(py, &obs.tensors[i].data)
-                .reshape(self.shapes[i].as_slice())?
-                .into_any())
+            // SAFETY: the array is created here with the tensor's size and filled completely
+            // before anything else can see it.
+            let arr = unsafe { PyArrayDyn::<f32>::new(py, self.shapes[i].as_slice(), false) };
+            // SAFETY: fresh, contiguous and not shared (see above).
+            let dst = unsafe { arr.as_slice_mut() }
+                .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+            dst.copy_from_slice(&obs.tensors[i].data);
+            Ok(arr.into_any())
         };
         match &self.keys {
             None => array(0),

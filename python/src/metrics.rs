@@ -89,7 +89,10 @@ fn a2perf_reliability(
     rollouts: Option<PyReadonlyArray1<'_, f64>>,
 ) -> PyResult<String> {
     let named = curves("curves", &runs, &steps, &values)?;
-    let returns = rollouts.as_ref().map(|r| self::rollouts("rollouts", r)).transpose()?;
+    let returns = rollouts
+        .as_ref()
+        .map(|r| self::rollouts("rollouts", r))
+        .transpose()?;
     let list: Vec<Curve> = named.curves();
     py.detach(|| {
         guard("the reliability metrics", || {
@@ -132,9 +135,8 @@ fn chan2019_evaluate<'py>(
         .map_err(|e| PyValueError::new_err(format!("invalid metric specification: {e}")))?;
     let name = metric.class_name();
     let (flat, shape) = if metric.takes_rollouts() {
-        let sets = rollout_sets.ok_or_else(|| {
-            PyTypeError::new_err(format!("{name} takes rollouts, not curves"))
-        })?;
+        let sets = rollout_sets
+            .ok_or_else(|| PyTypeError::new_err(format!("{name} takes rollouts, not curves")))?;
         let sets: Vec<Vec<f64>> = sets
             .iter()
             .enumerate()
@@ -151,7 +153,9 @@ fn chan2019_evaluate<'py>(
         (v, vec![n])
     } else {
         let (Some(runs), Some(steps), Some(values)) = (runs, steps, values) else {
-            return Err(PyTypeError::new_err(format!("{name} takes curves, not rollouts")));
+            return Err(PyTypeError::new_err(format!(
+                "{name} takes curves, not rollouts"
+            )));
         };
         let named = curves("curves", &runs, &steps, &values)?;
         let list = named.curves();
@@ -281,9 +285,10 @@ fn aggregate(name: &str, gamma: f64) -> PyResult<Aggregate> {
         "median" => Ok(Aggregate::Median),
         "optimality_gap" => Ok(Aggregate::OptimalityGap(gamma)),
         other => {
-            let hint = a2perf_core::did_you_mean(other, ["iqm", "mean", "median", "optimality_gap"])
-                .map(|h| format!(" (did you mean `{h}`?)"))
-                .unwrap_or_default();
+            let hint =
+                a2perf_core::did_you_mean(other, ["iqm", "mean", "median", "optimality_gap"])
+                    .map(|h| format!(" (did you mean `{h}`?)"))
+                    .unwrap_or_default();
             Err(PyValueError::new_err(format!(
                 "unknown aggregate `{other}`{hint}: use iqm, mean, median or optimality_gap"
             )))

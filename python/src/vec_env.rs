@@ -180,15 +180,25 @@ impl PyVecEnv {
             }
             let layout = &self.layout;
             let actions = &st.actions;
+            let one = |i: usize, slot: &mut Slot, out: &mut SlotOut<'_>| {
+                work(i, slot, &actions[i])?;
+                write_slot(layout, slot, out)
+            };
             py.detach(|| {
-                st.slots
-                    .par_iter_mut()
-                    .zip(outs.par_iter_mut())
-                    .enumerate()
-                    .try_for_each(|(i, (slot, out))| {
-                        work(i, slot, &actions[i])?;
-                        write_slot(layout, slot, out)
-                    })
+                if n == 1 {
+                    // No thread hand-off for a single environment.
+                    st.slots
+                        .iter_mut()
+                        .zip(outs.iter_mut())
+                        .enumerate()
+                        .try_for_each(|(i, (slot, out))| one(i, slot, out))
+                } else {
+                    st.slots
+                        .par_iter_mut()
+                        .zip(outs.par_iter_mut())
+                        .enumerate()
+                        .try_for_each(|(i, (slot, out))| one(i, slot, out))
+                }
             })?;
         }
         let copy = |a: Bound<'py, PyAny>| -> PyResult<Bound<'py, PyAny>> {
@@ -289,7 +299,8 @@ impl PyVecEnv {
             }
             let ended: Vec<bool> = st.slots.iter().map(|s| s.ended).collect();
             let as_objects = |l: Bound<'py, PyList>| -> PyResult<Bound<'py, PyAny>> {
-                let arr = np.call_method1("empty", (n, py.import("builtins")?.getattr("object")?))?;
+                let arr =
+                    np.call_method1("empty", (n, py.import("builtins")?.getattr("object")?))?;
                 for (i, x) in l.iter().enumerate() {
                     arr.set_item(i, x)?;
                 }
