@@ -649,6 +649,10 @@ impl Env for LocomotionEnv {
         };
         self.substeps = 0;
         self.steps = 0;
+        // A fresh physics world every episode: rapier keeps contact manifolds, warm-start
+        // impulses and broad-phase pairs across `set_state`, so the first steps after a seeded
+        // reset depended on the previous episode.
+        self.sim = Simulation::new(&self.model, self.sim.config().clone());
         // 1. Robot to the initial position and default pose.
         let (x, y, z) = self.model.init_position;
         let init = RobotState {

@@ -182,20 +182,55 @@ pub fn read_curves(path: &Path) -> Result<NamedCurves, CsvError> {
 
 /// [`read_curves`] on text already in memory (`path` is only used in messages).
 pub fn parse_curves(path: &Path, text: &str) -> Result<NamedCurves, CsvError> {
+    let mut rows = Vec::new();
+    for (n, f) in data_lines(path, text, "run,step,value")? {
+        let step = number(path, n, "step", f[1])?;
+        let value = number(path, n, "value", f[2])?;
+        rows.push((n, f[0], step, value));
+    }
+    curves_from_records(path, rows)
+}
+
+/// Groups `(line, run, step, value)` records into curves by the rules of [`read_curves`]: runs in
+/// order of first appearance, steps sorted per run, a step given twice for a run rejected. Used for
+/// data that is not a file (a table in memory); `path` and `line` only name records in messages.
+///
+/// ```
+/// use std::path::Path;
+/// let c = a2perf_metrics::csv::curves_from_records(
+///     Path::new("table"),
+///     [(0, "a", 1.0, 5.0), (1, "a", 0.0, 4.0), (2, "b", 0.0, 1.0)],
+/// )
+/// .unwrap();
+/// assert_eq!(c.runs[0].1.steps(), &[0.0, 1.0]);
+/// let err = a2perf_metrics::csv::curves_from_records(Path::new("table"), [(7, "a", 0.0, f64::NAN)]);
+/// assert!(err.unwrap_err().to_string().starts_with("table:7:"));
+/// ```
+pub fn curves_from_records<'a>(
+    path: &Path,
+    records: impl IntoIterator<Item = (usize, &'a str, f64, f64)>,
+) -> Result<NamedCurves, CsvError> {
     let mut order: Vec<String> = Vec::new();
     let mut points: BTreeMap<String, Vec<(f64, f64, usize)>> = BTreeMap::new();
-    for (n, f) in data_lines(path, text, "run,step,value")? {
-        if f[0].is_empty() {
+    for (n, run, step, value) in records {
+        if run.is_empty() {
             return Err(CsvError::Line {
                 path: path.to_path_buf(),
                 line: n,
                 message: "empty run id".into(),
             });
         }
-        let step = number(path, n, "step", f[1])?;
-        let value = number(path, n, "value", f[2])?;
-        let entry = points.entry(f[0].to_string()).or_insert_with(|| {
-            order.push(f[0].to_string());
+        for (what, v) in [("step", step), ("value", value)] {
+            if !v.is_finite() {
+                return Err(CsvError::Line {
+                    path: path.to_path_buf(),
+                    line: n,
+                    message: format!("{what} `{v}` is not finite"),
+                });
+            }
+        }
+        let entry = points.entry(run.to_string()).or_insert_with(|| {
+            order.push(run.to_string());
             Vec::new()
         });
         entry.push((step, value, n));
@@ -260,13 +295,44 @@ pub fn read_scores(path: &Path) -> Result<NamedScores, CsvError> {
 
 /// [`read_scores`] on text already in memory.
 pub fn parse_scores(path: &Path, text: &str) -> Result<NamedScores, CsvError> {
+    let mut rows = Vec::new();
+    for (n, f) in data_lines(path, text, "algorithm,task,run,score")? {
+        let score = number(path, n, "score", f[3])?;
+        rows.push((n, f[0], f[1], f[2], score));
+    }
+    scores_from_records(path, rows)
+}
+
+/// Groups `(line, algorithm, task, run, score)` records by the rules of [`read_scores`]. Used for
+/// data that is not a file; `path` and `line` only name records in messages.
+///
+/// ```
+/// use std::path::Path;
+/// let s = a2perf_metrics::csv::scores_from_records(
+///     Path::new("table"),
+///     [(0, "A", "t", "0", 1.0), (1, "A", "t", "1", 2.0)],
+/// )
+/// .unwrap();
+/// assert_eq!(s.algorithms[0].1.runs(), 2);
+/// ```
+pub fn scores_from_records<'a>(
+    path: &Path,
+    records: impl IntoIterator<Item = (usize, &'a str, &'a str, &'a str, f64)>,
+) -> Result<NamedScores, CsvError> {
     let mut tasks: Vec<String> = Vec::new();
     let mut algos: Vec<String> = Vec::new();
     // (algo, task, run) → (score, line)
     let mut cells: BTreeMap<(String, String, String), (f64, usize)> = BTreeMap::new();
     let mut runs_of: BTreeMap<String, Vec<String>> = BTreeMap::new();
-    for (n, f) in data_lines(path, text, "algorithm,task,run,score")? {
-        let score = number(path, n, "score", f[3])?;
+    for (n, algo, task, run, score) in records {
+        let f = [algo, task, run];
+        if !score.is_finite() {
+            return Err(CsvError::Line {
+                path: path.to_path_buf(),
+                line: n,
+                message: format!("score `{score}` is not finite"),
+            });
+        }
         if f[0].is_empty() || f[1].is_empty() || f[2].is_empty() {
             return Err(CsvError::Line {
                 path: path.to_path_buf(),

@@ -1,0 +1,145 @@
+"""The benchmark's environments as Gymnasium environments.
+
+Importing :mod:`a2perf_rs` registers every id in the ``a2perf`` namespace::
+
+    import gymnasium as gym
+    import a2perf_rs  # noqa: F401  (registers the ids)
+
+    env = gym.make("a2perf/QuadrupedLocomotion-DogPace-v0")
+    obs, info = env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+
+Keyword arguments of ``gym.make`` are the environment's typed parameters (``a2perf list`` or
+:func:`a2perf_rs.env_params` shows them); an unknown or mistyped name raises ``TypeError`` naming
+it, with a did-you-mean.
+
+**Action masks.** Discrete environments with illegal actions (circuit placement, web navigation)
+put the mask of the current state in ``info["action_mask"]`` (``np.int8``, 1 = legal, ready for
+``env.action_space.sample(mask=info["action_mask"])``) and return it from
+:meth:`A2PerfEnv.action_masks` (the method sb3-contrib's ``MaskablePPO`` calls). Observations stay
+exactly the Rust observation space; they carry no mask key.
+
+**Illegal actions.** Gymnasium lets every element of the action space be stepped. An action the
+mask forbids is not applied: by default (``illegal_action="terminate"``) the episode terminates
+with ``illegal_action_reward`` (default: the circuit's ``infeasible_reward``, else -1) and
+``info["illegal_action"] = True``; with ``illegal_action="raise"`` it raises ``ValueError``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+from . import _native
+from .spaces import to_gymnasium
+from .vector import A2PerfVectorEnv
+
+NAMESPACE = "a2perf"
+
+# Keyword arguments handled by the Python bindings rather than by the environment itself.
+BINDING_KWARGS = ("illegal_action", "illegal_action_reward")
+
+
+class A2PerfEnv(gym.Env[Any, Any]):
+    """One environment of the benchmark, stepped in Rust.
+
+    Args:
+        env_id: The benchmark id, e.g. ``"QuadrupedLocomotion-DogPace-v0"`` (without namespace).
+        render_mode: Must be ``None``: the benchmark's renderers are offline pictures
+            (``a2perf circuit render``, ``a2perf locomotion render``), not frames.
+        illegal_action: ``"terminate"`` (default) or ``"raise"``, see the module documentation.
+        illegal_action_reward: Reward of an illegal action under ``"terminate"``.
+        **params: The environment's parameters.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(
+        self,
+        env_id: str,
+        render_mode: str | None = None,
+        illegal_action: str = "terminate",
+        illegal_action_reward: float | None = None,
+        **params: Any,
+    ) -> None:
+        if render_mode is not None:
+            raise ValueError(
+                f"render_mode={render_mode!r} is not supported: {env_id} has no frame renderer"
+            )
+        self.render_mode = None
+        self._native = _native.Env(
+            env_id,
+            params,
+            illegal_action=illegal_action,
+            illegal_action_reward=illegal_action_reward,
+        )
+        spec = self._native.spec()
+        self.env_id = env_id
+        self.observation_space = to_gymnasium(spec["observation_space"])
+        self.action_space = to_gymnasium(spec["action_space"])
+        self.max_episode_steps: int | None = spec["max_episode_steps"]
+        self.params: dict[str, Any] = spec["params"]
+        self.provenance: dict[str, str] = spec["metadata"]
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Starts an episode. ``seed`` re-seeds the episode's randomness (same seed ⇒ same
+        episode); without it the environment continues its own random stream."""
+        super().reset(seed=seed)
+        return self._native.reset(seed)
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Applies ``action``; returns ``(observation, reward, terminated, truncated, info)``."""
+        return self._native.step(action)
+
+    def action_masks(self) -> np.ndarray | None:
+        """The legal actions of the current state as a boolean array (``None`` when the action
+        space is continuous)."""
+        mask = self._native.action_mask()
+        return None if mask is None else mask.astype(bool)
+
+    def close(self) -> None:
+        """Releases the environment's resources (its Chromium browser for the web ids with
+        ``backend="chromium"``). Calling it twice is fine."""
+        native = getattr(self, "_native", None)
+        if native is not None:
+            native.close()
+
+    def __repr__(self) -> str:
+        return f"A2PerfEnv({self.env_id!r})"
+
+
+def env_params(env_id: str) -> list[tuple[str, str, list[str], Any, str]]:
+    """The typed parameters of ``env_id`` (with or without the ``a2perf/`` namespace) as
+    ``(name, kind, choices, default, doc)``."""
+    bare = env_id.split("/", 1)[1] if env_id.startswith(NAMESPACE + "/") else env_id
+    for entry_id, _domain, _summary, params in _native.env_entries():
+        if entry_id == bare:
+            return list(params)
+    raise gym.error.UnregisteredEnv(f"no a2perf environment {env_id!r}")
+
+
+def env_ids() -> list[str]:
+    """Every environment id, with its ``a2perf/`` namespace."""
+    return [f"{NAMESPACE}/{entry[0]}" for entry in _native.env_entries()]
+
+
+def register_all() -> None:
+    """Registers every benchmark environment in Gymnasium's ``a2perf`` namespace (idempotent)."""
+    for entry_id, _domain, _summary, _params in _native.env_entries():
+        full = f"{NAMESPACE}/{entry_id}"
+        if full in gym.registry:
+            continue
+        gym.register(
+            id=full,
+            entry_point=A2PerfEnv,
+            vector_entry_point=A2PerfVectorEnv,
+            kwargs={"env_id": entry_id},
+            # Episode limits depend on parameters (web `step_limit`, circuit macros, locomotion
+            # `episode_steps`); the environments truncate themselves at their spec's limit.
+            max_episode_steps=None,
+            disable_env_checker=False,
+        )

@@ -1,0 +1,67 @@
+//! # a2perf-python
+//!
+//! The native extension `a2perf_rs._native` of the `a2perf_rs` Python package (built by maturin,
+//! see `pyproject.toml`): the benchmark's environments, vector stepping over Rust threads, the
+//! reliability metrics and rliable statistics, and the circuit placement cost. The Python side
+//! (`python/a2perf_rs/`) turns these into Gymnasium environments and numpy/pandas functions.
+//!
+//! One module per area: [`env`] (one environment), [`vec_env`] (N environments stepped in Rust
+//! threads with the GIL released), [`metrics`], [`circuit`]; [`convert`] and [`errors`] hold the
+//! conversions and the exception mapping they share.
+//!
+//! It deliberately holds no benchmark logic of its own: environments come from
+//! `a2perf_pipeline::registry`, metrics from `a2perf-metrics`, costs from `a2perf-circuit`.
+
+use pyo3::prelude::*;
+use pyo3::types::{PyList, PyTuple};
+
+pub mod circuit;
+pub mod convert;
+pub mod env;
+pub mod errors;
+pub mod metrics;
+pub mod vec_env;
+
+/// Every registered environment as `(id, domain, summary, [(name, kind, choices, default,
+/// doc), …])`.
+#[pyfunction]
+fn env_entries(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
+    let out = PyList::empty(py);
+    for e in env::registry().envs() {
+        let params = PyList::empty(py);
+        for p in &e.params {
+            params.append(convert::param_to_py(py, p)?)?;
+        }
+        out.append(PyTuple::new(
+            py,
+            [
+                e.id.clone().into_pyobject(py)?.into_any(),
+                e.domain.clone().into_pyobject(py)?.into_any(),
+                e.summary.clone().into_pyobject(py)?.into_any(),
+                params.into_any(),
+            ],
+        )?)?;
+    }
+    Ok(out)
+}
+
+/// `None` when Chromium and chromedriver are installed, else the reason they cannot be used.
+#[pyfunction]
+fn chromium_unavailable_reason() -> Option<String> {
+    a2perf_web::chromium::chromium_available()
+        .err()
+        .map(|e| e.to_string())
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("BackendError", m.py().get_type::<errors::BackendError>())?;
+    m.add_function(wrap_pyfunction!(env_entries, m)?)?;
+    m.add_function(wrap_pyfunction!(chromium_unavailable_reason, m)?)?;
+    m.add_class::<env::PyEnv>()?;
+    m.add_class::<vec_env::PyVecEnv>()?;
+    metrics::register(m)?;
+    circuit::register(m)?;
+    Ok(())
+}

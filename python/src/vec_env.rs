@@ -1,0 +1,585 @@
+//! N environments stepped together in Rust threads with the GIL released (the engine of
+//! `a2perf_rs.vector.A2PerfVectorEnv`).
+//!
+//! Observations, rewards, flags and masks are written straight into preallocated numpy arrays;
+//! each environment's work runs on rayon's pool. Semantics are Gymnasium 1.x's: `reset(seed=s)`
+//! seeds environment `i` with `s + i` (as `SyncVectorEnv` does), later resets continue each
+//! environment's own stream, and the autoreset mode is next-step (default) or same-step. So N
+//! single environments reset with seeds `s + i` and stepped with the same actions produce the same
+//! trajectories, which the tests check.
+
+use std::sync::{Mutex, MutexGuard};
+
+use a2perf_core::{Action, Observation};
+use numpy::{
+    PyArray1, PyArray2, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
+use rayon::prelude::*;
+
+use crate::convert::ActionSpec;
+use crate::env::{EpisodeCore, IllegalAction, ObsLayout, guard_close, make_env, spec_to_py};
+
+/// Gymnasium's autoreset modes that are supported.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Autoreset {
+    /// The step after an episode ends resets that environment (its action is ignored).
+    NextStep,
+    /// An environment whose episode ends is reset in the same step; the last observation and
+    /// info go to `info["final_obs"]`, `info["final_info"]`.
+    SameStep,
+}
+
+struct Slot {
+    core: EpisodeCore,
+    /// Next-step mode: this environment is reset at the next `step`.
+    pending_reset: bool,
+    /// Same-step mode: the episode ended in this step; its last observation and info.
+    ended: bool,
+    final_obs: Observation,
+    final_info: a2perf_core::Info,
+    final_illegal: bool,
+}
+
+/// Where one environment writes its outcome.
+struct SlotOut<'a> {
+    obs: Vec<&'a mut [f32]>,
+    reward: &'a mut f64,
+    terminated: &'a mut bool,
+    truncated: &'a mut bool,
+    mask: Option<&'a mut [i8]>,
+}
+
+struct Buffers {
+    obs: Vec<Py<PyArrayDyn<f32>>>,
+    rewards: Py<PyArray1<f64>>,
+    terminated: Py<PyArray1<bool>>,
+    truncated: Py<PyArray1<bool>>,
+    masks: Option<Py<PyArray2<i8>>>,
+}
+
+struct State {
+    slots: Vec<Slot>,
+    actions: Vec<Action>,
+    bufs: Buffers,
+    closed: bool,
+}
+
+/// N environments of one id: `a2perf_rs._native.VecEnv(env_id, num_envs, params, …)`.
+#[pyclass(module = "a2perf_rs._native", name = "VecEnv")]
+pub struct PyVecEnv {
+    state: Mutex<State>,
+    layout: ObsLayout,
+    action: ActionSpec,
+    spec: a2perf_core::EnvSpec,
+    params: std::collections::BTreeMap<String, a2perf_core::Value>,
+    autoreset: Autoreset,
+    copy: bool,
+}
+
+fn write_obs(layout: &ObsLayout, obs: &Observation, out: &mut SlotOut<'_>) -> PyResult<()> {
+    layout.check(obs)?;
+    for (dst, t) in out.obs.iter_mut().zip(&obs.tensors) {
+        dst.copy_from_slice(&t.data);
+    }
+    Ok(())
+}
+
+fn write_slot(layout: &ObsLayout, slot: &Slot, out: &mut SlotOut<'_>) -> PyResult<()> {
+    let s = &slot.core.step;
+    write_obs(layout, &s.observation, out)?;
+    *out.reward = s.reward;
+    *out.terminated = s.terminated;
+    *out.truncated = s.truncated;
+    if let Some(dst) = out.mask.as_deref_mut() {
+        match &s.observation.action_mask {
+            Some(m) if m.len() == dst.len() => {
+                for (o, v) in dst.iter_mut().zip(m) {
+                    *o = i8::from(*v);
+                }
+            }
+            Some(m) => {
+                return Err(PyRuntimeError::new_err(format!(
+                    "the environment returned an action mask of {} entries for {} actions",
+                    m.len(),
+                    dst.len()
+                )));
+            }
+            None => dst.fill(1),
+        }
+    }
+    Ok(())
+}
+
+impl PyVecEnv {
+    fn state(&self) -> PyResult<MutexGuard<'_, State>> {
+        let st = self.state.lock().map_err(|_| {
+            PyRuntimeError::new_err("the vector environment is unusable after an earlier failure")
+        })?;
+        if st.closed {
+            return Err(PyRuntimeError::new_err("the vector environment is closed"));
+        }
+        Ok(st)
+    }
+
+    /// Runs `work` on every slot in parallel (GIL released), then writes the outcomes into the
+    /// buffers; returns `(obs, rewards, terminated, truncated, infos)`.
+    fn run<'py>(
+        &self,
+        py: Python<'py>,
+        st: &mut State,
+        work: impl Fn(usize, &mut Slot, &Action) -> PyResult<()> + Sync,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let n = st.slots.len();
+        let obs_bufs: Vec<Bound<'py, PyArrayDyn<f32>>> =
+            st.bufs.obs.iter().map(|b| b.bind(py).clone()).collect();
+        let rewards = st.bufs.rewards.bind(py).clone();
+        let terminated = st.bufs.terminated.bind(py).clone();
+        let truncated = st.bufs.truncated.bind(py).clone();
+        let masks = st.bufs.masks.as_ref().map(|m| m.bind(py).clone());
+        {
+            let mut obs_rw: Vec<_> = obs_bufs.iter().map(|b| b.readwrite()).collect();
+            let mut rew_rw = rewards.readwrite();
+            let mut term_rw = terminated.readwrite();
+            let mut trunc_rw = truncated.readwrite();
+            let mut mask_rw = masks.as_ref().map(|m| m.readwrite());
+            let slices = |e: numpy::AsSliceError| PyRuntimeError::new_err(e.to_string());
+            let mut obs_rows: Vec<std::slice::ChunksMut<'_, f32>> = obs_rw
+                .iter_mut()
+                .zip(&self.layout.dims)
+                .map(|(rw, d)| Ok(rw.as_slice_mut().map_err(slices)?.chunks_mut((*d).max(1))))
+                .collect::<PyResult<_>>()?;
+            let mut mask_rows = match mask_rw.as_mut() {
+                Some(rw) => {
+                    let n_actions = rw.shape()[1].max(1);
+                    Some(rw.as_slice_mut().map_err(slices)?.chunks_mut(n_actions))
+                }
+                None => None,
+            };
+            let mut outs: Vec<SlotOut<'_>> = rew_rw
+                .as_slice_mut()
+                .map_err(slices)?
+                .iter_mut()
+                .zip(term_rw.as_slice_mut().map_err(slices)?.iter_mut())
+                .zip(trunc_rw.as_slice_mut().map_err(slices)?.iter_mut())
+                .map(|((reward, terminated), truncated)| SlotOut {
+                    obs: obs_rows.iter_mut().filter_map(Iterator::next).collect(),
+                    reward,
+                    terminated,
+                    truncated,
+                    mask: mask_rows.as_mut().and_then(Iterator::next),
+                })
+                .collect();
+            if outs.len() != n || outs.iter().any(|o| o.obs.len() != self.layout.dims.len()) {
+                return Err(PyRuntimeError::new_err(
+                    "internal error: buffer layout mismatch",
+                ));
+            }
+            let layout = &self.layout;
+            let actions = &st.actions;
+            let one = |i: usize, slot: &mut Slot, out: &mut SlotOut<'_>| {
+                work(i, slot, &actions[i])?;
+                write_slot(layout, slot, out)
+            };
+            py.detach(|| {
+                if n == 1 {
+                    // No thread hand-off for a single environment.
+                    st.slots
+                        .iter_mut()
+                        .zip(outs.iter_mut())
+                        .enumerate()
+                        .try_for_each(|(i, (slot, out))| one(i, slot, out))
+                } else {
+                    st.slots
+                        .par_iter_mut()
+                        .zip(outs.par_iter_mut())
+                        .enumerate()
+                        .try_for_each(|(i, (slot, out))| one(i, slot, out))
+                }
+            })?;
+        }
+        let copy = |a: Bound<'py, PyAny>| -> PyResult<Bound<'py, PyAny>> {
+            if self.copy {
+                a.call_method0(pyo3::intern!(py, "copy"))
+            } else {
+                Ok(a)
+            }
+        };
+        let obs = self.layout.wrap(
+            py,
+            obs_bufs
+                .into_iter()
+                .map(|b| copy(b.into_any()))
+                .collect::<PyResult<_>>()?,
+        )?;
+        let infos = self.infos(py, st, masks.map(|m| m.into_any()).map(&copy).transpose()?)?;
+        PyTuple::new(
+            py,
+            [
+                obs,
+                copy(rewards.into_any())?,
+                copy(terminated.into_any())?,
+                copy(truncated.into_any())?,
+                infos.into_any(),
+            ],
+        )
+    }
+
+    /// Gymnasium's vector info dict: each key maps to an array over environments and `_key` to a
+    /// boolean array saying which environments have it.
+    fn infos<'py>(
+        &self,
+        py: Python<'py>,
+        st: &State,
+        masks: Option<Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let n = st.slots.len();
+        let d = PyDict::new(py);
+        let mut keys: Vec<&str> = Vec::new();
+        for s in &st.slots {
+            for (k, _) in s.core.step.info.iter() {
+                if !keys.contains(&k) {
+                    keys.push(k);
+                }
+            }
+        }
+        for k in keys {
+            let mut values = vec![0.0f64; n];
+            let mut has = vec![false; n];
+            for (i, s) in st.slots.iter().enumerate() {
+                if let Some(v) = s.core.step.info.get(k) {
+                    values[i] = v;
+                    has[i] = true;
+                }
+            }
+            d.set_item(k, PyArray1::from_vec(py, values))?;
+            d.set_item(format!("_{k}"), PyArray1::from_vec(py, has))?;
+        }
+        if let Some(m) = masks {
+            d.set_item(pyo3::intern!(py, "action_mask"), m)?;
+            d.set_item("_action_mask", PyArray1::from_vec(py, vec![true; n]))?;
+        }
+        let illegal: Vec<bool> = st
+            .slots
+            .iter()
+            .map(|s| {
+                if s.ended {
+                    s.final_illegal
+                } else {
+                    s.core.illegal
+                }
+            })
+            .collect();
+        if illegal.iter().any(|b| *b) {
+            d.set_item("illegal_action", PyArray1::from_vec(py, illegal.clone()))?;
+            d.set_item("_illegal_action", PyArray1::from_vec(py, illegal))?;
+        }
+        if self.autoreset == Autoreset::SameStep && st.slots.iter().any(|s| s.ended) {
+            let np = py.import("numpy")?;
+            let final_obs = PyList::empty(py);
+            let final_info = PyList::empty(py);
+            for s in &st.slots {
+                if s.ended {
+                    final_obs.append(self.layout.to_py(py, &s.final_obs)?)?;
+                    let fi = PyDict::new(py);
+                    for (k, v) in s.final_info.iter() {
+                        fi.set_item(k, v)?;
+                    }
+                    if s.final_illegal {
+                        fi.set_item("illegal_action", true)?;
+                    }
+                    final_info.append(fi)?;
+                } else {
+                    final_obs.append(py.None())?;
+                    final_info.append(PyDict::new(py))?;
+                }
+            }
+            let ended: Vec<bool> = st.slots.iter().map(|s| s.ended).collect();
+            let as_objects = |l: Bound<'py, PyList>| -> PyResult<Bound<'py, PyAny>> {
+                let arr =
+                    np.call_method1("empty", (n, py.import("builtins")?.getattr("object")?))?;
+                for (i, x) in l.iter().enumerate() {
+                    arr.set_item(i, x)?;
+                }
+                Ok(arr)
+            };
+            d.set_item("final_obs", as_objects(final_obs)?)?;
+            d.set_item("_final_obs", PyArray1::from_vec(py, ended.clone()))?;
+            d.set_item("final_info", as_objects(final_info)?)?;
+            d.set_item("_final_info", PyArray1::from_vec(py, ended))?;
+        }
+        Ok(d)
+    }
+
+    /// Parses the batch of actions into `st.actions`.
+    fn parse_actions(&self, st: &mut State, actions: &Bound<'_, PyAny>) -> PyResult<()> {
+        let n = st.slots.len();
+        match &self.action {
+            ActionSpec::Discrete(_) => {
+                let arr: PyReadonlyArray1<'_, i64> = actions.extract().map_err(|_| {
+                    PyTypeError::new_err(format!(
+                        "actions must be an int64 array of shape ({n},) (a2perf_rs converts \
+                         integer arrays); got {}",
+                        actions
+                            .get_type()
+                            .name()
+                            .map(|s| s.to_string())
+                            .unwrap_or_default()
+                    ))
+                })?;
+                if arr.len() != n {
+                    return Err(PyValueError::new_err(format!(
+                        "actions have shape {:?}, expected ({n},)",
+                        arr.shape()
+                    )));
+                }
+                for (i, (a, out)) in arr.as_array().iter().zip(&mut st.actions).enumerate() {
+                    let a = self
+                        .action
+                        .check_discrete(*a)
+                        .map_err(|e| PyValueError::new_err(format!("environment {i}: {e}")))?;
+                    *out = Action::Discrete(a);
+                }
+            }
+            ActionSpec::Box { shape, .. } => {
+                let arr: PyReadonlyArray2<'_, f32> = actions.extract().map_err(|_| {
+                    PyTypeError::new_err(format!(
+                        "actions must be a float32 array of shape ({n}, {}); got {}",
+                        shape
+                            .iter()
+                            .map(|d| d.to_string())
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                        actions
+                            .get_type()
+                            .name()
+                            .map(|s| s.to_string())
+                            .unwrap_or_default()
+                    ))
+                })?;
+                let view = arr.as_array();
+                if view.nrows() != n {
+                    return Err(PyValueError::new_err(format!(
+                        "actions have shape {:?}, expected ({n}, …)",
+                        arr.shape()
+                    )));
+                }
+                for (i, (row, out)) in view.rows().into_iter().zip(&mut st.actions).enumerate() {
+                    let v: Vec<f32> = row.iter().copied().collect();
+                    if !matches!(out, Action::Continuous(_)) {
+                        *out = Action::Continuous(Vec::new());
+                    }
+                    if let Action::Continuous(buf) = out {
+                        self.action
+                            .check_box(&v, &[v.len()], buf)
+                            .map_err(|e| PyValueError::new_err(format!("environment {i}: {e}")))?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[pymethods]
+impl PyVecEnv {
+    /// `num_envs` environments `env_id` with `params`.
+    #[new]
+    #[pyo3(signature = (env_id, num_envs, params=None, autoreset_mode="next_step", copy=true, illegal_action="terminate", illegal_action_reward=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        env_id: &str,
+        num_envs: usize,
+        params: Option<&Bound<'_, PyDict>>,
+        autoreset_mode: &str,
+        copy: bool,
+        illegal_action: &str,
+        illegal_action_reward: Option<f64>,
+    ) -> PyResult<Self> {
+        if num_envs == 0 {
+            return Err(PyValueError::new_err("num_envs must be at least 1"));
+        }
+        let autoreset = match autoreset_mode {
+            "next_step" | "NextStep" => Autoreset::NextStep,
+            "same_step" | "SameStep" => Autoreset::SameStep,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "autoreset_mode `{other}` is not supported: use next_step or same_step"
+                )));
+            }
+        };
+        let mut slots = Vec::with_capacity(num_envs);
+        let mut first = None;
+        for _ in 0..num_envs {
+            let (env, resolved) = make_env(env_id, params)?;
+            let policy = IllegalAction::parse(illegal_action, illegal_action_reward, &resolved)?;
+            if first.is_none() {
+                first = Some((env.spec().clone(), resolved));
+            }
+            slots.push(Slot {
+                core: EpisodeCore::new(env, policy),
+                pending_reset: false,
+                ended: false,
+                final_obs: Observation::default(),
+                final_info: Default::default(),
+                final_illegal: false,
+            });
+        }
+        let Some((spec, params)) = first else {
+            return Err(PyValueError::new_err("num_envs must be at least 1"));
+        };
+        let layout = ObsLayout::of(py, &spec.observation_space)?;
+        let action = ActionSpec::of(&spec.action_space)?;
+        let masks = match spec.action_space {
+            a2perf_core::Space::Discrete { n } => Some(
+                PyArray1::<i8>::from_vec(py, vec![1; num_envs * n])
+                    .reshape([num_envs, n])?
+                    .unbind(),
+            ),
+            _ => None,
+        };
+        let bufs = Buffers {
+            obs: layout
+                .buffers(py, num_envs)
+                .into_iter()
+                .map(Bound::unbind)
+                .collect(),
+            rewards: PyArray1::zeros(py, num_envs, false).unbind(),
+            terminated: PyArray1::from_vec(py, vec![false; num_envs]).unbind(),
+            truncated: PyArray1::from_vec(py, vec![false; num_envs]).unbind(),
+            masks,
+        };
+        let actions = match action {
+            ActionSpec::Discrete(_) => vec![Action::Discrete(0); num_envs],
+            ActionSpec::Box { .. } => vec![Action::Continuous(Vec::new()); num_envs],
+        };
+        Ok(Self {
+            state: Mutex::new(State {
+                slots,
+                actions,
+                bufs,
+                closed: false,
+            }),
+            layout,
+            action,
+            spec,
+            params,
+            autoreset,
+            copy,
+        })
+    }
+
+    /// Number of environments.
+    #[getter]
+    fn num_envs(&self) -> PyResult<usize> {
+        Ok(self.state()?.slots.len())
+    }
+
+    /// The spec of the environments (as `Env.spec()`).
+    fn spec<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        spec_to_py(py, &self.spec, &self.params)
+    }
+
+    /// Resets every environment (`seeds[i]` for environment `i`, `None` = continue its own
+    /// stream); returns `(obs, infos)`.
+    fn reset<'py>(
+        &self,
+        py: Python<'py>,
+        seeds: Vec<Option<u64>>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let mut st = self.state()?;
+        if seeds.len() != st.slots.len() {
+            return Err(PyValueError::new_err(format!(
+                "{} seeds for {} environments",
+                seeds.len(),
+                st.slots.len()
+            )));
+        }
+        let out = self.run(py, &mut st, |i, slot, _| {
+            slot.pending_reset = false;
+            slot.ended = false;
+            slot.core.reset(seeds[i])
+        })?;
+        let obs = out.get_item(0)?;
+        let infos = out.get_item(4)?;
+        PyTuple::new(py, [obs, infos])
+    }
+
+    /// Steps environment `i` with `actions[i]`; returns `(obs, rewards, terminated, truncated,
+    /// infos)`. `actions`: int64 `(N,)` for discrete spaces, float32 `(N, dim)` for boxes.
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        actions: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let mut st = self.state()?;
+        self.parse_actions(&mut st, actions)?;
+        let mode = self.autoreset;
+        self.run(py, &mut st, |_, slot, action| {
+            slot.ended = false;
+            if slot.pending_reset {
+                slot.pending_reset = false;
+                return slot.core.reset(None);
+            }
+            slot.core.step(action)?;
+            if slot.core.step.done() {
+                match mode {
+                    Autoreset::NextStep => slot.pending_reset = true,
+                    Autoreset::SameStep => {
+                        slot.ended = true;
+                        slot.final_obs.copy_from(&slot.core.step.observation);
+                        slot.final_info.clone_from(&slot.core.step.info);
+                        slot.final_illegal = slot.core.illegal;
+                        let (reward, terminated, truncated) = (
+                            slot.core.step.reward,
+                            slot.core.step.terminated,
+                            slot.core.step.truncated,
+                        );
+                        slot.core.reset(None)?;
+                        // The step's reward and flags are reported with the new observation.
+                        slot.core.step.reward = reward;
+                        slot.core.step.terminated = terminated;
+                        slot.core.step.truncated = truncated;
+                    }
+                }
+            }
+            Ok(())
+        })
+    }
+
+    /// Closes every environment (releasing e.g. their Chromium browsers). Closing twice is fine.
+    fn close(&self, py: Python<'_>) -> PyResult<()> {
+        let mut st = self
+            .state
+            .lock()
+            .map_err(|_| PyRuntimeError::new_err("the vector environment is unusable"))?;
+        if st.closed {
+            return Ok(());
+        }
+        st.closed = true;
+        let slots = std::mem::take(&mut st.slots);
+        py.detach(|| {
+            let mut first_err = None;
+            for mut s in slots {
+                if let Err(e) = guard_close(&mut s.core) {
+                    first_err.get_or_insert(e);
+                }
+            }
+            first_err.map_or(Ok(()), Err)
+        })
+    }
+
+    /// Whether `close()` was called.
+    #[getter]
+    fn closed(&self) -> PyResult<bool> {
+        Ok(self
+            .state
+            .lock()
+            .map_err(|_| PyRuntimeError::new_err("the vector environment is unusable"))?
+            .closed)
+    }
+}

@@ -1,0 +1,188 @@
+"""Gymnasium environments: registration, check_env for every id, spaces, seeding, masks, close."""
+
+from __future__ import annotations
+
+import os
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import a2perf_rs
+from a2perf_rs import A2PerfEnv
+from conftest import file_kwargs, require_chromium, shared
+
+ALL_IDS = a2perf_rs.env_ids()
+WEB_IDS = [i for i in ALL_IDS if "WebNavigation" in i]
+
+
+def test_every_registry_id_is_registered_in_the_a2perf_namespace() -> None:
+    assert len(ALL_IDS) == 12
+    for env_id in ALL_IDS:
+        assert env_id.startswith("a2perf/")
+        assert env_id in gym.registry
+        assert gym.registry[env_id].vector_entry_point is not None
+    # The original package's name stays free.
+    import importlib.util
+
+    assert importlib.util.find_spec("a2perf_rs") is not None
+    assert not hasattr(a2perf_rs, "__path__") or all("a2perf_rs" in p for p in a2perf_rs.__path__)
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_check_env_passes(env_id: str) -> None:
+    env = gym.make(env_id, **file_kwargs(env_id))
+    try:
+        check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("env_id", WEB_IDS)
+def test_check_env_passes_on_chromium(env_id: str) -> None:
+    require_chromium()
+    env = gym.make(env_id, backend="chromium", num_websites=1)
+    try:
+        check_env(env.unwrapped, skip_close_check=True)
+    finally:
+        env.close()
+
+
+def test_locomotion_with_the_motion_file() -> None:
+    clip = shared("locomotion", "motions", "dog_pace.txt")
+    env = gym.make("a2perf/QuadrupedLocomotion-DogPace-v0", motion_file=str(clip))
+    assert env.unwrapped.provenance["clip_source"] != ""
+    check_env(env.unwrapped)
+    env.close()
+
+
+def test_spaces_are_the_rust_spaces_exactly() -> None:
+    env = A2PerfEnv("QuadrupedLocomotion-DogPace-v0")
+    native = env._native.spec()
+    _, low, high = native["observation_space"]
+    obs_space = env.observation_space
+    assert isinstance(obs_space, gym.spaces.Box)
+    assert obs_space.dtype == np.float32 and obs_space.shape == (160,)
+    np.testing.assert_array_equal(obs_space.low, low)
+    np.testing.assert_array_equal(obs_space.high, high)
+    assert isinstance(env.action_space, gym.spaces.Box) and env.action_space.shape == (12,)
+
+    web = A2PerfEnv("WebNavigation-Difficulty-01-v0", num_fields=5, num_elements=20, num_tokens=4)
+    assert isinstance(web.observation_space, gym.spaces.Dict)
+    assert list(web.observation_space.keys()) == [
+        "profile_keys", "profile_values", "profile_mask", "dom_tokens", "dom_features", "dom_mask",
+    ]
+    assert web.observation_space["dom_tokens"].shape[0] == 20
+    assert web.action_space == gym.spaces.Discrete(20 * 5 * 2)
+    obs, info = web.reset(seed=0)
+    assert all(obs[k].dtype == np.float32 for k in obs)
+    assert obs in web.observation_space
+    mask = info["action_mask"]
+    assert mask.dtype == np.int8 and mask.shape == (200,) and mask.sum() > 0
+    np.testing.assert_array_equal(web.action_masks(), mask.astype(bool))
+    legal = web.action_space.sample(mask=mask)
+    assert mask[legal] == 1
+    # Circuit: dict observations with infinite bounds where the Rust space has them.
+    circ = A2PerfEnv("CircuitTraining-Synthetic-Small-v0")
+    assert np.isinf(circ.observation_space["grid"].high).all()
+    assert circ.max_episode_steps == 12
+
+
+def test_params_are_typed_and_resolved() -> None:
+    env = gym.make("a2perf/WebNavigation-Difficulty-02-v0", num_websites=3, seed=4)
+    assert env.unwrapped.params["num_websites"] == 3
+    assert env.unwrapped.params["backend"] == "simulated"
+    names = [p[0] for p in a2perf_rs.env_params("a2perf/WebNavigation-Difficulty-02-v0")]
+    assert "num_websites" in names and "backend" in names
+    # numpy scalars and paths are accepted.
+    env2 = A2PerfEnv("QuadrupedLocomotion-DogPace-v0", episode_steps=np.int64(50))
+    assert env2.max_episode_steps == 50
+
+
+def test_same_seed_same_episode_and_reset_does_not_leak_state() -> None:
+    env = A2PerfEnv("QuadrupedLocomotion-DogTrot-v0")
+    actions = np.random.default_rng(0).uniform(-0.3, 0.3, (20, 12)).astype(np.float32)
+
+    def episode() -> list[np.ndarray]:
+        obs, _ = env.reset(seed=11)
+        out = [obs]
+        for a in actions:
+            obs, r, term, trunc, _ = env.step(a)
+            out.append(np.append(obs, r))
+            if term or trunc:
+                break
+        return out
+
+    first, second = episode(), episode()
+    assert all(np.array_equal(a, b) for a, b in zip(first, second))
+    other = A2PerfEnv("QuadrupedLocomotion-DogTrot-v0")
+    assert not np.array_equal(other.reset(seed=12)[0], first[0])
+
+
+def test_episode_limit_truncates_and_step_after_end_raises() -> None:
+    env = A2PerfEnv("QuadrupedLocomotion-DogPace-v0", episode_steps=3)
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(12, np.float32))[2:4] for _ in range(3)]
+    assert flags[-1] in ((False, True), (True, False))
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(np.zeros(12, np.float32))
+
+
+def test_illegal_actions_terminate_by_default_or_raise() -> None:
+    env = A2PerfEnv("WebNavigation-Difficulty-01-v0", num_websites=1)
+    _, info = env.reset(seed=0)
+    illegal = int(np.flatnonzero(info["action_mask"] == 0)[0])
+    obs, reward, terminated, truncated, info = env.step(illegal)
+    assert terminated and not truncated and reward == -1.0 and info["illegal_action"] is True
+    circuit = A2PerfEnv("CircuitTraining-Synthetic-Small-v0", infeasible_reward=-7.5)
+    _, info = circuit.reset(seed=0)
+    bad = int(np.flatnonzero(info["action_mask"] == 0)[0])
+    assert circuit.step(bad)[1] == -7.5
+    strict = A2PerfEnv("WebNavigation-Difficulty-01-v0", num_websites=1, illegal_action="raise")
+    strict.reset(seed=0)
+    with pytest.raises(ValueError, match=f"action {illegal} is masked out"):
+        strict.step(illegal)
+    with pytest.raises(ValueError, match="did you mean `raise`"):
+        A2PerfEnv("WebNavigation-Difficulty-01-v0", illegal_action="rase")
+
+
+def test_a_circuit_episode_ends_with_the_proxy_cost() -> None:
+    env = A2PerfEnv("CircuitTraining-Synthetic-Small-v0", std_cell_placer="none")
+    obs, info = env.reset(seed=1)
+    total, terminated = 0.0, False
+    while not terminated:
+        obs, reward, terminated, truncated, info = env.step(
+            env.action_space.sample(mask=info["action_mask"])
+        )
+        total += reward
+    assert info["proxy"] > 0 and total == pytest.approx(-info["proxy"])
+
+
+def _children() -> set[int]:
+    me = str(os.getpid())
+    out = set()
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if fields[1] == me:
+            out.add(int(pid))
+    return out
+
+
+def test_close_releases_the_chromium_backend() -> None:
+    require_chromium()
+    before = _children()
+    env = gym.make("a2perf/WebNavigation-Difficulty-01-v0", backend="chromium", num_websites=1)
+    env.reset(seed=0)
+    assert _children() - before, "the Chromium backend should run as a child process"
+    env.close()
+    assert not (_children() - before), "close() must stop chromedriver and the browser"
+    env.close()  # twice is fine
+    with pytest.raises(RuntimeError, match="closed"):
+        env.unwrapped.reset(seed=0)

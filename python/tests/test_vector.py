@@ -1,0 +1,130 @@
+"""Native vector environments: Gymnasium 1.x semantics and equality with N single environments."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+from a2perf_rs import A2PerfEnv, A2PerfVectorEnv
+
+CASES = [
+    ("CircuitTraining-Synthetic-Small-v0", {"std_cell_placer": "none"}, 40),
+    ("WebNavigation-Difficulty-01-v0", {"num_websites": 3}, 60),
+    ("QuadrupedLocomotion-DogPace-v0", {"episode_steps": 15}, 40),
+]
+
+
+def _row(obs, i):
+    return {k: v[i] for k, v in obs.items()} if isinstance(obs, dict) else obs[i]
+
+
+def _equal(a, b) -> bool:
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    return np.array_equal(a, b)
+
+
+def _actions(venv: A2PerfVectorEnv, infos, rng: np.random.Generator) -> np.ndarray:
+    if isinstance(venv.single_action_space, gym.spaces.Discrete):
+        # A finished episode may have no legal action left; next-step autoreset ignores it.
+        legal = [np.flatnonzero(m) for m in infos["action_mask"]]
+        return np.array([rng.choice(ix) if ix.size else 0 for ix in legal])
+    return rng.uniform(-0.4, 0.4, (venv.num_envs, 12)).astype(np.float32)
+
+
+@pytest.mark.parametrize(("env_id", "params", "steps"), CASES)
+def test_vector_equals_n_single_environments(env_id: str, params: dict, steps: int) -> None:
+    n = 3
+    venv = gym.make_vec(
+        f"a2perf/{env_id}", num_envs=n, vectorization_mode="vector_entry_point", **params
+    )
+    assert isinstance(venv, gym.vector.VectorEnv)
+    assert venv.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    singles = [A2PerfEnv(env_id, **params) for _ in range(n)]
+    obs, infos = venv.reset(seed=7)
+    for i, env in enumerate(singles):
+        o, _ = env.reset(seed=7 + i)
+        assert _equal(_row(obs, i), o)
+    assert obs in venv.observation_space
+    rng = np.random.default_rng(0)
+    ended = [False] * n
+    episodes = 0
+    for _ in range(steps):
+        actions = _actions(venv, infos, rng)
+        obs, rewards, terms, truncs, infos = venv.step(actions)
+        for i, env in enumerate(singles):
+            if ended[i]:  # next-step autoreset: this step resets environment i
+                o, info = env.reset()
+                r, te, tr = 0.0, False, False
+            else:
+                o, r, te, tr, info = env.step(actions[i])
+            ended[i] = te or tr
+            episodes += int(ended[i])
+            assert _equal(_row(obs, i), o)
+            assert (rewards[i], terms[i], truncs[i]) == (r, te, tr)
+            if "action_mask" in info:
+                np.testing.assert_array_equal(infos["action_mask"][i], info["action_mask"])
+    assert episodes >= n, "the run should cover autoresets"
+    venv.close()
+
+
+def test_same_step_autoreset_reports_the_final_observation() -> None:
+    venv = A2PerfVectorEnv(
+        "QuadrupedLocomotion-DogPace-v0",
+        num_envs=2,
+        episode_steps=3,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+    )
+    single = A2PerfEnv("QuadrupedLocomotion-DogPace-v0", episode_steps=3)
+    obs, _ = venv.reset(seed=3)
+    single.reset(seed=3)
+    zero = np.zeros((2, 12), np.float32)
+    for t in range(3):
+        obs, rewards, terms, truncs, infos = venv.step(zero)
+        o, r, te, tr, _ = single.step(zero[0])
+        assert rewards[0] == r
+    assert truncs[0] or terms[0]
+    assert infos["_final_obs"][0]
+    np.testing.assert_array_equal(infos["final_obs"][0], o)
+    np.testing.assert_array_equal(obs[0], single.reset()[0])
+
+
+def test_copy_false_returns_the_preallocated_buffers() -> None:
+    venv = A2PerfVectorEnv("QuadrupedLocomotion-DogPace-v0", num_envs=2, copy=False)
+    a, _ = venv.reset(seed=0)
+    b, *_ = venv.step(np.zeros((2, 12), np.float32))
+    assert a is b or np.shares_memory(a, b)
+    copying = A2PerfVectorEnv("QuadrupedLocomotion-DogPace-v0", num_envs=2)
+    c, _ = copying.reset(seed=0)
+    d, *_ = copying.step(np.zeros((2, 12), np.float32))
+    assert not np.shares_memory(c, d)
+
+
+def test_seeds_per_environment_and_bad_vector_input() -> None:
+    venv = A2PerfVectorEnv("QuadrupedLocomotion-DogTrot-v0", num_envs=2)
+    a, _ = venv.reset(seed=[5, 9])
+    b, _ = venv.reset(seed=5)
+    np.testing.assert_array_equal(a[0], b[0])
+    assert not np.array_equal(a[1], b[1])
+    with pytest.raises(ValueError, match="shape"):
+        venv.step(np.zeros((3, 12), np.float32))
+    with pytest.raises(TypeError, match="real numbers"):
+        venv.step(np.array([["a"] * 12] * 2))
+    with pytest.raises(ValueError, match="outside the action space"):
+        venv.step(np.full((2, 12), 100.0, np.float32))
+    with pytest.raises(ValueError, match="2 seeds for 3|3 seeds for 2"):
+        venv.reset(seed=[1, 2, 3])
+    with pytest.raises(ValueError, match="at least 1"):
+        A2PerfVectorEnv("QuadrupedLocomotion-DogTrot-v0", num_envs=0)
+    web = A2PerfVectorEnv("WebNavigation-Difficulty-01-v0", num_envs=2)
+    web.reset(seed=0)
+    with pytest.raises(TypeError, match="integers"):
+        web.step(np.array([0.5, 1.0]))
+    with pytest.raises(ValueError, match="outside Discrete"):
+        web.step(np.array([0, 10**9]))
+    venv.close()
+    venv.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        venv.reset(seed=0)
