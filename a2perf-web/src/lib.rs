@@ -71,6 +71,7 @@ pub mod dom;
 pub mod env;
 pub mod error;
 pub mod generator;
+pub mod legacy_random;
 pub mod primitives;
 pub mod site;
 pub mod vocab;
@@ -86,8 +87,8 @@ pub use chromium::{
     other_browser_processes,
 };
 pub use design::{Design, level_of_probability, load_designs, page_difficulty, parse_designs};
-pub use dom::{ActionKind, DomState, Event};
-pub use env::{BackendKind, WebNavConfig, WebNavEnv};
+pub use dom::{ActionKind, DomState, Event, Quirks};
+pub use env::{ActionSemantics, BackendKind, PoolKind, WebNavConfig, WebNavEnv};
 pub use error::WebError;
 pub use generator::{
     DesignReport, Generated, Limits, Unsolvable, check_solvable, generate, report, sample_design,
@@ -152,7 +153,40 @@ fn params() -> Vec<ParamSpec> {
             "designs",
             ParamKind::Path,
             Value::Null,
-            "A2Perf design JSON to draw the pool from instead of the generator",
+            "A2Perf design JSON (its 01/02/03.json): with pool = generated, its solvable designs \
+             of the id's recomputed level; with pool = a2perf, all of them",
+        ),
+        ParamSpec::new(
+            "pool",
+            ParamKind::Choice(&["generated", "a2perf"]),
+            Value::Str("generated".into()),
+            "generated: solvable websites of the id's level; a2perf: the `designs` file as it is, \
+             drawn like A2Perf (same designs for the same seed)",
+        ),
+        ParamSpec::new(
+            "cc_bug",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "true: A2Perf's cc (credit-card type) radio group can never be selected",
+        ),
+        ParamSpec::new(
+            "placeholders",
+            ParamKind::Bool,
+            Value::Bool(true),
+            "fill the observation's placeholder slot (false: always empty, as in A2Perf)",
+        ),
+        ParamSpec::new(
+            "limit_terminates",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "true: the step limit sets terminated as well as truncated, as in A2Perf",
+        ),
+        ParamSpec::new(
+            "actions",
+            ParamKind::Choice(&["masked", "a2perf"]),
+            Value::Str("masked".into()),
+            "masked: click/type, meaningful actions only; a2perf: A2Perf's visitGroup, every \
+             (element, field) allowed, stale reward on a missing element",
         ),
     ]
 }
@@ -174,6 +208,17 @@ fn config_from(level: u8, p: &Params) -> Result<WebNavConfig, EnvError> {
     c.num_tokens = p.usize("num_tokens").map_err(e)?;
     c.step_limit = p.usize("step_limit").map_err(e)?;
     c.designs_file = p.opt_str("designs").map_err(e)?.map(PathBuf::from);
+    c.pool = match p.str("pool").map_err(e)? {
+        "a2perf" => PoolKind::A2Perf,
+        _ => PoolKind::Generated,
+    };
+    c.cc_bug = p.bool("cc_bug").map_err(e)?;
+    c.placeholders = p.bool("placeholders").map_err(e)?;
+    c.limit_terminates = p.bool("limit_terminates").map_err(e)?;
+    c.actions = match p.str("actions").map_err(e)? {
+        "a2perf" => ActionSemantics::A2Perf,
+        _ => ActionSemantics::Masked,
+    };
     Ok(c)
 }
 
