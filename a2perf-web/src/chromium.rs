@@ -979,6 +979,11 @@ impl ChromiumBackend {
             ActionKind::Type(v) => (1, value(v)),
             ActionKind::Visit(v) => (2, v.map_or(Json::Null, value)),
         };
+        // `visitGroup` acts on the element that owns the id (see `Website::id_owner`).
+        let node = match kind {
+            ActionKind::Visit(_) => site.id_owner.get(node).map_or(node, |&o| o as usize),
+            _ => node,
+        };
         let args = [json!(k), json!(node), val, json!(quirks.cc_bug)];
         let v = self.call_in_page("function(k,n,v,b){return this.a2p.step(k,n,v,b);}", &args)?;
         ingest(&v, site, state)

@@ -291,8 +291,9 @@ pub struct Website {
     pub controls: Vec<u32>,
     /// Radio buttons of each radio group (the index is [`Node::group`]).
     pub radio_groups: Vec<Vec<u32>>,
-    /// For every element, the first element (in document order) with the same `id`, itself when
-    /// its id is unique or empty: what `document.getElementById` finds.
+    /// For every element, the element A2Perf's `visitGroup` acts on when given its `id`: the
+    /// first (in document order) with the same `id`, except that a page's next/submit button
+    /// owns its id; itself when its id is unique or empty.
     pub id_owner: Vec<u32>,
 }
 
@@ -912,7 +913,15 @@ impl Website {
             .filter(|(_, n)| n.tag.is_control())
             .map(|(i, _)| i as u32)
             .collect();
-        let mut first_with: HashMap<&str, u32> = HashMap::new();
+        // A page's extra `next_*` (or `submit`) buttons share the working button's id; the
+        // original bound the transition to the first element with that id and `visitGroup`
+        // acts on the first, so any of them works: the working button owns the id.
+        let mut first_with: HashMap<&str, u32> = nodes
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| matches!(n.behaviour, Behaviour::Next(_) | Behaviour::Submit))
+            .map(|(i, n)| (n.html_id.as_str(), i as u32))
+            .collect();
         let id_owner = nodes
             .iter()
             .enumerate()
@@ -1184,11 +1193,11 @@ pub const SCRIPT: &str = r#"(function () {
     if (!g) { el.classList.add('visited'); return; }
     Array.prototype.forEach.call(g, function (r) { if (val !== null && r.value === val) r.checked = true; mark(r); });
   }
-  // A2Perf's visitGroup(id, value) (ActionKind::Visit in dom.rs).
+  // A2Perf's visitGroup(id, value) (ActionKind::Visit in dom.rs) on element n, the owner of the
+  // acted element's id (Website::id_owner).
   function visit(n, val, ccBug) {
-    var id = nodes[n] ? nodes[n].id : '';
-    var el = id ? document.getElementById(id) : null;
-    if (!el || !visible(el)) return;
+    var el = nodes[n];
+    if (!el || !el.id || !visible(el)) return;
     el.classList.add('visited');
     var t = el.tagName, ty = el.type;
     if (t === 'SELECT' || (t === 'INPUT' && (ty === 'text' || ty === 'number' || ty === 'password' || ty === 'email'))) {

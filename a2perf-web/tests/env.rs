@@ -1,30 +1,18 @@
 //! Environment semantics on the simulated backend: contract, rewards, termination, masks,
 //! determinism.
 
+mod common;
+
 use std::collections::BTreeMap;
 
 use a2perf_core::{Action, Env, EnvError, Observation, Registry, RngStream, Space, Step, Value};
 use a2perf_web::site::{Behaviour, Tag};
-use a2perf_web::{Design, Primitive, VOCAB_SIZE, WebNavConfig, WebNavEnv};
+use a2perf_web::{VOCAB_SIZE, WebNavConfig, WebNavEnv};
+use common::slot;
 use proptest::prelude::*;
 
 fn env_with(pages: &[&[&str]]) -> WebNavEnv {
-    let design = Design {
-        pages: pages
-            .iter()
-            .map(|p| p.iter().map(|n| Primitive::from_name(n).unwrap()).collect())
-            .collect(),
-    };
-    WebNavEnv::with_pool(vec![design], WebNavConfig::new(1), "t").unwrap()
-}
-
-/// Observation slot of the first visible element matching `pred`.
-fn slot(env: &WebNavEnv, pred: impl Fn(&a2perf_web::site::Node) -> bool) -> usize {
-    env.dom()
-        .order
-        .iter()
-        .position(|&n| pred(&env.website().nodes[n as usize]))
-        .expect("element present")
+    common::env_on(pages, WebNavConfig::new(1))
 }
 
 #[test]
