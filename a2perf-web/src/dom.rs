@@ -45,6 +45,11 @@ pub struct Quirks {
     /// `cc` (credit-card type) group is never found: acting on one of its buttons only marks that
     /// button `visited` and never checks anything (the original's `cc` bug).
     pub cc_bug: bool,
+    /// Render an active primitive again when a later page repeats it, as the original did:
+    /// a text input, select or checkbox copy shares the first copy's id, so the original read and
+    /// acted on the first one only (the copy holds no field); a radio-group copy has ids of its
+    /// own and works (its buttons join the field and share the first group's `name`).
+    pub duplicate_fields: bool,
 }
 
 /// Dynamic state of every element.
@@ -260,11 +265,16 @@ impl DomState {
         (0..site.fields.len()).all(|f| self.field_correct(site, f))
     }
 
+    /// Checks radio `i`, unchecking the others of its `name` (every copy of its field's group).
     fn check_radio(&mut self, site: &Website, i: usize) {
-        if let Some(g) = site.nodes[i].group {
-            for &r in site.radio_group(g) {
-                self.checked[r as usize] = false;
-            }
+        let node = &site.nodes[i];
+        let same_name = match (node.field, node.group) {
+            (Some(f), _) => site.fields[usize::from(f)].nodes.as_slice(),
+            (None, Some(g)) => site.radio_group(g),
+            (None, None) => &[],
+        };
+        for &r in same_name {
+            self.checked[r as usize] = false;
         }
         self.checked[i] = true;
     }

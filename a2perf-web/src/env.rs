@@ -95,6 +95,9 @@ pub struct WebNavConfig {
     pub pool: PoolKind,
     /// Reproduce A2Perf's unselectable `cc` radio group (see [`Quirks::cc_bug`]).
     pub cc_bug: bool,
+    /// Render an active primitive repeated on a later page, as A2Perf did (see
+    /// [`Quirks::duplicate_fields`]).
+    pub duplicate_fields: bool,
     /// Fill the observation's placeholder slot from the element's `placeholder` (A2Perf's is
     /// always empty: its patched MiniWoB reads a key the page never sends).
     pub placeholders: bool,
@@ -127,6 +130,7 @@ impl WebNavConfig {
             designs_file: None,
             pool: PoolKind::Generated,
             cc_bug: false,
+            duplicate_fields: false,
             placeholders: true,
             limit_terminates: false,
             actions: ActionSemantics::Masked,
@@ -146,6 +150,7 @@ impl WebNavConfig {
             designs_file: Some(designs_file),
             pool: PoolKind::A2Perf,
             cc_bug: true,
+            duplicate_fields: true,
             placeholders: false,
             limit_terminates: true,
             actions: ActionSemantics::A2Perf,
@@ -166,6 +171,7 @@ impl WebNavConfig {
     pub fn quirks(&self) -> Quirks {
         Quirks {
             cc_bug: self.cc_bug,
+            duplicate_fields: self.duplicate_fields,
         }
     }
 
@@ -387,6 +393,7 @@ impl WebNavEnv {
             .into(),
         );
         metadata.insert("cc_bug".into(), flag(cfg.cc_bug));
+        metadata.insert("duplicate_fields".into(), flag(cfg.duplicate_fields));
         metadata.insert("placeholders".into(), flag(cfg.placeholders));
         metadata.insert("limit_terminates".into(), flag(cfg.limit_terminates));
         let (actions, layout) = match cfg.actions {
@@ -822,10 +829,11 @@ impl WebNavEnv {
 
     fn start_episode(&mut self, index: usize, obs: &mut Observation) -> Result<(), EnvError> {
         self.pool_index = index;
-        self.site = Website::build(
+        self.site = Website::build_with(
             &self.pool[self.pool_index],
             &mut self.rng,
             Vocabulary::standard(),
+            self.cfg.quirks(),
         );
         self.state.reset(&self.site);
         self.load_in_browser()?;

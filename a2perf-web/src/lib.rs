@@ -170,6 +170,13 @@ fn params() -> Vec<ParamSpec> {
             "true: A2Perf's cc (credit-card type) radio group can never be selected",
         ),
         ParamSpec::new(
+            "duplicate_fields",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "true: render an active primitive repeated on a later page, as A2Perf did (inputs \
+             dead, radio groups working)",
+        ),
+        ParamSpec::new(
             "placeholders",
             ParamKind::Bool,
             Value::Bool(true),
@@ -213,6 +220,7 @@ fn config_from(level: u8, p: &Params) -> Result<WebNavConfig, EnvError> {
         _ => PoolKind::Generated,
     };
     c.cc_bug = p.bool("cc_bug").map_err(e)?;
+    c.duplicate_fields = p.bool("duplicate_fields").map_err(e)?;
     c.placeholders = p.bool("placeholders").map_err(e)?;
     c.limit_terminates = p.bool("limit_terminates").map_err(e)?;
     c.actions = match p.str("actions").map_err(e)? {

@@ -10,6 +10,7 @@ use std::fmt::Write as _;
 use a2perf_core::RngStream;
 
 use crate::design::Design;
+use crate::dom::Quirks;
 use crate::primitives::{Primitive, ProfileValue};
 use crate::vocab::Vocabulary;
 
@@ -781,6 +782,17 @@ impl Website {
     /// assert!(site.to_html(false).contains("Payment"));
     /// ```
     pub fn build(design: &Design, rng: &mut RngStream, vocab: &Vocabulary) -> Website {
+        Self::build_with(design, rng, vocab, Quirks::default())
+    }
+
+    /// [`Website::build`] with the original's page behaviours that `quirks` asks for (of which
+    /// [`Quirks::duplicate_fields`] changes the elements; the random content is the same).
+    pub fn build_with(
+        design: &Design,
+        rng: &mut RngStream,
+        vocab: &Vocabulary,
+        quirks: Quirks,
+    ) -> Website {
         let mut b = Builder {
             nodes: Vec::new(),
             strings: vec![String::new(), "true".into(), "false".into(), "1".into()],
@@ -802,7 +814,10 @@ impl Website {
                     continue;
                 }
                 seen.push(prim);
-                if prim.info().active && placed.iter().any(|(q, _)| *q == prim) {
+                if prim.info().active
+                    && !quirks.duplicate_fields
+                    && placed.iter().any(|(q, _)| *q == prim)
+                {
                     continue;
                 }
                 list.push(prim);
@@ -836,7 +851,19 @@ impl Website {
                 }
                 let nodes = b.primitive(prim);
                 if prim.info().active {
-                    placed.push((prim, nodes));
+                    match placed.iter_mut().find(|(q, _)| *q == prim) {
+                        // A later page's copy: a radio group (ids with the page) joins the
+                        // field; another control shares the first copy's id and holds nothing.
+                        Some((_, first)) => {
+                            if nodes
+                                .first()
+                                .is_some_and(|&n| b.nodes[n as usize].tag == Tag::InputRadio)
+                            {
+                                first.extend(nodes);
+                            }
+                        }
+                        None => placed.push((prim, nodes)),
+                    }
                 }
             }
             let (concept, text, beh) = match (last, nav) {
@@ -1057,7 +1084,15 @@ impl Website {
             h.push('"');
         }
         if let Some(g) = n.group {
-            let _ = write!(h, " name=\"radio{g}\" value=\"");
+            // Copies of a field's radio group share one name, as in the original.
+            match n.field {
+                Some(f) => {
+                    let _ = write!(h, " name=\"field{f}\" value=\"");
+                }
+                None => {
+                    let _ = write!(h, " name=\"radio{g}\" value=\"");
+                }
+            }
             escape_into(h, &self.strings[n.radio_value as usize]);
             h.push('"');
         }
@@ -1178,15 +1213,16 @@ pub const SCRIPT: &str = r#"(function () {
     if (ae && ae.dataset && ae.dataset.n !== undefined) f = +ae.dataset.n;
     return { v: v, c: c, x: x, w: w, f: f, p: a2p.page, e: a2p.event };
   };
-  // The radios of el's group; null when A2Perf's lookup (the concept between the id's first two
-  // '_' names the group's root class) fails and ccBug asks for that lookup.
+  // The radios of el's group (under its root, two levels up); null when A2Perf's lookup (the
+  // concept between the id's first two '_' names the root's class) fails and ccBug asks for it.
   function groupOf(el, ccBug) {
+    var root = el.parentElement && el.parentElement.parentElement;
     if (ccBug) {
       var c = el.id.substring(el.id.indexOf('_') + 1);
       c = c.substring(0, c.indexOf('_'));
-      if (!c || !el.closest('.' + c + 'root')) return null;
+      root = c ? el.closest('.' + c + 'root') : null;
     }
-    return document.getElementsByName(el.name);
+    return root ? root.querySelectorAll('input[type="radio"]') : null;
   }
   function setRadio(el, val, ccBug) {
     var g = groupOf(el, ccBug);

@@ -8,6 +8,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use a2perf_core::{Action, Env, Observation, RngStream, Step};
+use a2perf_web::site::Behaviour;
 use a2perf_web::{
     ActionSemantics, BackendKind, ChromiumBackend, ChromiumOptions, Design, Limits, Primitive,
     TreeMemory, Vocabulary, WebNavConfig, WebNavEnv, Website, chromium_available, generate,
@@ -217,24 +218,27 @@ fn a2perf_semantics_agree_in_both_backends() {
 }
 
 fn exhaustive_control_parity(mut cfg: WebNavConfig) {
-    let names = [
-        "numberofpeople",
-        "rememberme",
-        "stayloggedin",
-        "cc",
-        "cabin",
-        "state",
-        "username",
-        "city",
-        "submit",
+    // Two pages; the second repeats four of the first's fields (rendered with
+    // `duplicate_fields`: inputs sharing the first copy's id, a second cc and cabin group).
+    let pages: [&[&str]; 2] = [
+        &[
+            "numberofpeople",
+            "rememberme",
+            "stayloggedin",
+            "cc",
+            "cabin",
+            "state",
+            "username",
+            "city",
+            "next_login",
+        ],
+        &["username", "cabin", "cc", "rememberme", "state", "submit"],
     ];
     let design = Design {
-        pages: vec![
-            names
-                .iter()
-                .map(|n| Primitive::from_name(n).unwrap())
-                .collect(),
-        ],
+        pages: pages
+            .iter()
+            .map(|p| p.iter().map(|n| Primitive::from_name(n).unwrap()).collect())
+            .collect(),
     };
     let mut sim = WebNavEnv::with_pool(vec![design.clone()], cfg.clone(), "sim").unwrap();
     cfg.backend = BackendKind::Chromium;
@@ -260,25 +264,40 @@ fn exhaustive_control_parity(mut cfg: WebNavConfig) {
         real.reset_to_website(0, seed, &mut ro).unwrap();
         compare(&so, &ro, &format!("seed {seed} reset"));
         let fields = sim.website().fields.len();
-        let controls: Vec<usize> = (0..sim.dom().order.len())
-            .filter(|&e| {
-                sim.website().nodes[sim.dom().order[e] as usize]
-                    .tag
-                    .is_control()
-            })
-            .collect();
-        for &e in &controls {
-            for f in 0..=fields {
-                for kind in 0..2 {
-                    let a = sim.action_index(e, f, kind);
-                    if !so.is_legal(a) && sim.config().actions == ActionSemantics::Masked {
-                        continue;
+        for page in 0..2 {
+            let controls: Vec<usize> = (0..sim.dom().order.len())
+                .filter(|&e| {
+                    sim.website().nodes[sim.dom().order[e] as usize]
+                        .tag
+                        .is_control()
+                })
+                .collect();
+            for &e in &controls {
+                for f in 0..=fields {
+                    for kind in 0..2 {
+                        let a = sim.action_index(e, f, kind);
+                        if !so.is_legal(a) && sim.config().actions == ActionSemantics::Masked {
+                            continue;
+                        }
+                        let ctx =
+                            format!("seed {seed} page {page}: element {e} field {f} kind {kind}");
+                        step_both(&mut sim, &mut real, a, &mut ss, &mut rs, &ctx);
+                        so.copy_from(&ss.observation);
+                        steps += 1;
                     }
-                    let ctx = format!("seed {seed}: element {e} field {f} kind {kind}");
-                    step_both(&mut sim, &mut real, a, &mut ss, &mut rs, &ctx);
-                    so.copy_from(&ss.observation);
-                    steps += 1;
                 }
+            }
+            if page == 0 {
+                let next = (0..sim.dom().order.len())
+                    .find(|&e| {
+                        let n = sim.dom().order[e] as usize;
+                        matches!(sim.website().nodes[n].behaviour, Behaviour::Next(_))
+                    })
+                    .unwrap();
+                let a = sim.action_index(next, 0, 0);
+                step_both(&mut sim, &mut real, a, &mut ss, &mut rs, "next page");
+                so.copy_from(&ss.observation);
+                assert_eq!(sim.dom().page, 1);
             }
         }
     }

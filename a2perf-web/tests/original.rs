@@ -508,3 +508,68 @@ fn a2perf_checkboxes_are_clicked_by_loosely_true_values_only() {
     seen.dedup();
     assert_eq!(seen, ["1", "2", "3", "4", "5"]);
 }
+
+#[test]
+fn duplicate_fields_render_dead_inputs_and_working_radio_groups() {
+    let pages: &[&[&str]] = &[
+        &["username", "cabin", "next_login"],
+        &["username", "cabin", "submit"],
+    ];
+    let ids = |env: &WebNavEnv| -> Vec<String> {
+        env.dom()
+            .order
+            .iter()
+            .map(|&n| env.website().nodes[n as usize].html_id.clone())
+            .collect()
+    };
+    let to_page_1 = |env: &mut WebNavEnv| {
+        let next = slot(env, |n| matches!(n.behaviour, Behaviour::Next(_)));
+        act(env, (next, 0, 0));
+        assert_eq!(env.dom().page, 1);
+    };
+    // Default: the second page shows no copy of a field.
+    let mut env = env_on(pages, WebNavConfig::new(1));
+    env.reset(Some(0)).unwrap();
+    to_page_1(&mut env);
+    assert!(!ids(&env).iter().any(|i| i.contains("username") || i.contains("cabin")));
+    for actions in [ActionSemantics::Masked, ActionSemantics::A2Perf] {
+        let mut cfg = WebNavConfig::new(1);
+        cfg.duplicate_fields = true;
+        cfg.actions = actions;
+        let mut env = env_on(pages, cfg);
+        env.reset(Some(0)).unwrap();
+        assert_eq!(env.website().fields.len(), 2);
+        // Check the cabin radio that is *not* the gold value on page 0.
+        let cabin = field_of(&env, "cabin");
+        let gold = env.website().fields[cabin - 1].value_id;
+        let wrong = slot(&env, |n| n.tag == Tag::InputRadio && n.radio_value != gold);
+        act(&mut env, (wrong, 0, 0));
+        to_page_1(&mut env);
+        let on_page_1 = ids(&env);
+        assert!(on_page_1.contains(&"actionable_username".to_string()));
+        assert!(on_page_1.contains(&"actionable_cabin_p1_i0".to_string()));
+        // The username copy holds no field: typing into it does not move the potential.
+        let u = slot(&env, |n| n.html_id == "actionable_username");
+        let fu = field_of(&env, "username");
+        let s = act(&mut env, (u, fu, 1));
+        let expect = match actions {
+            // A2Perf acts on the first copy, hidden on page 0: nothing happens.
+            ActionSemantics::A2Perf => -0.55,
+            // A user types into the copy: the page changes, the profile field does not.
+            ActionSemantics::Masked => -0.05,
+        };
+        assert!(close(s.reward, expect), "{actions:?}: {}", s.reward);
+        // The cabin copy works and shares the group's name: checking the gold value there
+        // unchecks page 0's wrong choice and fills the field (+1/2 − 0.05).
+        let g1 = slot(&env, |n| n.tag == Tag::InputRadio && n.radio_value == gold);
+        let s = act(&mut env, (g1, cabin, 1));
+        assert!(close(s.reward, 0.5 - 0.05), "{actions:?}: {}", s.reward);
+        let checked: Vec<u32> = env.website().fields[cabin - 1]
+            .nodes
+            .iter()
+            .copied()
+            .filter(|&n| env.dom().checked[n as usize])
+            .collect();
+        assert_eq!(checked.len(), 1, "{actions:?}");
+    }
+}
