@@ -24,21 +24,39 @@
 //!
 //! | tensor | shape | content |
 //! |---|---|---|
-//! | `profile_keys`, `profile_values` | [F, T] | tokens of the profile fields, sorted by key |
-//! | `profile_mask` | \[F\] | 1 = field present |
+//! | `profile_keys`, `profile_values` | [F, T] | field 0: A2Perf's `_dummy` (key `_dummy`, no value); fields 1..: the profile, sorted by key |
+//! | `profile_mask` | \[F\] | 1 = field present (`_dummy` always) |
 //! | `dom_tokens` | [E, 5, T] | per visible element (document order): tag, value, text, placeholder, classes |
 //! | `dom_features` | [E, 8] | focused, tampered (acted on), new (not visible before), is_div, x, y, w, h |
 //! | `dom_mask` | \[E\] | 1 = element present |
+//! | `time_step` | \[1\] | steps taken / step limit (A2Perf's `time_step`) |
 //!
 //! Geometry is divided by the largest right / bottom edge of the page, so it lies in [0, 1].
 //! The action is `Discrete(E·F·2)`, flat index `(element·F + field)·2 + kind`, kind 0 = click,
-//! 1 = type the field's profile value into the element. The action mask allows clicks only with
-//! field 0 (the field does not matter to a click) and typing only into inputs/selects with a
-//! present field.
+//! 1 = type the field's profile value into the element ([`WebNavEnv::a2perf_action`] maps it to
+//! the original's index). The action mask allows clicks only with field 0 (`_dummy`: the field
+//! does not matter to a click) and typing only into inputs/selects with a present field ≥ 1.
 //!
 //! Reward per step: `ΔΦ − 0.05 − 0.5·[page unchanged]` while running, where Φ is the share of
 //! fields that were acted on and hold their gold value; at submit `ΔΦ ± 1` (+1 iff every field is
 //! correct); a distractor click gives `ΔΦ − 1` and ends the episode; 25 steps truncate.
+//!
+//! ## The original's behaviour, on request
+//!
+//! By default the environment corrects the original's bugs (the unselectable `cc` radio group,
+//! unsolvable step budgets, shuffled level files, an empty placeholder slot, run-time vocabulary
+//! growth, unseeded episode draws). Each difference that changes what an agent sees or gets has a
+//! switch (an environment parameter) that reproduces A2Perf; [`WebNavConfig::a2perf`] turns them
+//! all on:
+//!
+//! | parameter | default | A2Perf |
+//! |---|---|---|
+//! | `pool` (+ `designs`) | `generated`: solvable websites of the id's level | `a2perf`: the original's 0N.json as it is, drawn like numpy's `RandomState(seed)` |
+//! | `cc_bug` | `false` | `true`: the `cc` radio group can never be selected |
+//! | `duplicate_fields` | `false` | `true`: an active primitive repeated on a later page is rendered (inputs dead, radio groups working) |
+//! | `placeholders` | `true` | `false`: the placeholder slot is always empty |
+//! | `limit_terminates` | `false` | `true`: the step limit sets `terminated` too |
+//! | `actions` | `masked` | `a2perf`: `visitGroup` semantics, the joint mask, the stale reward |
 //!
 //! ```
 //! use a2perf_core::{Action, Env};
@@ -57,11 +75,9 @@
 //! assert!(ret > 1.0);
 //! ```
 //!
-//! It deliberately does not reproduce the original's bugs (the unselectable `cc` radio group,
-//! unsolvable step budgets, run-time vocabulary growth, unseeded episode draws, the stale reward
-//! on out-of-range element indices) nor its Bootstrap/jQuery look: pages are plain HTML with a
-//! layout chosen so geometry is exact in both backends. It does not learn; agents live in
-//! `a2perf-baselines`.
+//! It does not reproduce the original's Bootstrap/jQuery look (pages are plain HTML with a
+//! layout chosen so geometry is exact in both backends), its wall-clock episode timer or its
+//! run-time vocabulary. It does not learn; agents live in `a2perf-baselines`.
 
 #![warn(missing_docs)]
 
