@@ -145,7 +145,7 @@ fn params() -> Vec<ParamSpec> {
             "num_fields",
             ParamKind::Int,
             Value::Int(env::DEFAULT_FIELDS as i64),
-            "profile fields in the observation (F)",
+            "profile fields in the observation (F), field 0 being A2Perf's `_dummy`",
         ),
         ParamSpec::new(
             "num_elements",

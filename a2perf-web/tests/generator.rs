@@ -3,7 +3,7 @@
 
 mod common;
 
-use a2perf_core::{Action, Env, Observation, RngStream, Step};
+use a2perf_core::RngStream;
 use a2perf_web::{
     Design, Limits, OOV_ID, Vocabulary, WebNavConfig, WebNavEnv, Website, generate, load_designs,
     report,

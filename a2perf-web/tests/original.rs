@@ -531,7 +531,11 @@ fn duplicate_fields_render_dead_inputs_and_working_radio_groups() {
     let mut env = env_on(pages, WebNavConfig::new(1));
     env.reset(Some(0)).unwrap();
     to_page_1(&mut env);
-    assert!(!ids(&env).iter().any(|i| i.contains("username") || i.contains("cabin")));
+    assert!(
+        !ids(&env)
+            .iter()
+            .any(|i| i.contains("username") || i.contains("cabin"))
+    );
     for actions in [ActionSemantics::Masked, ActionSemantics::A2Perf] {
         let mut cfg = WebNavConfig::new(1);
         cfg.duplicate_fields = true;
