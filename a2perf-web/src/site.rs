@@ -764,8 +764,9 @@ impl Website {
     /// Builds the website of `design` with this episode's random content (profile values, prices,
     /// carousel slide) drawn from `rng`.
     ///
-    /// Rules where the original was ambiguous or broken: a second instance of an active concept is
-    /// not rendered (the original gave it a duplicate id, so only the first was usable); repeated
+    /// Rules where the original was ambiguous or broken: a second instance of an active concept on
+    /// a later page is not rendered (the original gave an input copy the first copy's id, so
+    /// only the first was usable; [`Website::build_with`] renders it on request); repeated
     /// (primitive, page) pairs are rendered once (as `design_environment` does); on each page but
     /// the last, the first `next_*` button is the page's "next" control (default text "Next")
     /// and any other is a dead button; on the last page the first `submit` is the submit control
