@@ -262,7 +262,7 @@ pub fn register(reg: &mut Registry) {
             id: env_id(level),
             domain: DOMAIN.into(),
             summary: format!(
-                "fill gMiniWoB web forms from a profile, difficulty level {level} (generated, solvable websites)"
+                "fill gMiniWoB web forms from a profile, difficulty level {level} (generated, solvable websites; pool = a2perf plays A2Perf's design files)"
             ),
             params: params(),
             make: Arc::new(move |p: &Params| {
