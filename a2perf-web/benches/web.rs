@@ -92,6 +92,22 @@ fn simulated(c: &mut Criterion) {
             s.len()
         );
     }
+    // The original's semantics (every switch of `WebNavConfig::a2perf`) on the generated level-3
+    // pool (A2Perf's design files are not shipped).
+    let mut cfg = WebNavConfig::a2perf(3, "unused".into());
+    cfg.designs_file = None;
+    let pool = WebNavConfig::new(3).pool().unwrap();
+    let mut env = WebNavEnv::with_pool(pool, cfg, "bench").unwrap();
+    c.bench_function("simulated_step_level3_a2perf_semantics", |b| {
+        b.iter_custom(|iters| timed_steps(&mut env, iters, 1).0)
+    });
+    let (_, mut s) = timed_steps(&mut env, 20_000, 9);
+    println!(
+        "simulated level 3, A2Perf's semantics: step p50 {:.2} µs, p90 {:.2} µs over {} steps",
+        percentile(&mut s, 0.5),
+        percentile(&mut s, 0.9),
+        s.len()
+    );
 }
 
 fn load_average() -> String {

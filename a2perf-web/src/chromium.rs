@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::{Value as Json, json};
 
-use crate::dom::{ActionKind, DomState, Event};
+use crate::dom::{ActionKind, DomState, Event, Quirks};
 use crate::error::WebError;
 use crate::site::{Website, intern, shell_html};
 
@@ -970,16 +970,22 @@ impl ChromiumBackend {
         state: &mut DomState,
         node: usize,
         kind: ActionKind,
+        quirks: Quirks,
     ) -> Result<(), WebError> {
+        let value =
+            |v: u32| Json::String(site.strings.get(v as usize).cloned().unwrap_or_default());
         let (k, val) = match kind {
             ActionKind::Click => (0, Json::Null),
-            ActionKind::Type(v) => (
-                1,
-                Json::String(site.strings.get(v as usize).cloned().unwrap_or_default()),
-            ),
+            ActionKind::Type(v) => (1, value(v)),
+            ActionKind::Visit(v) => (2, v.map_or(Json::Null, value)),
         };
-        let args = [json!(k), json!(node), val];
-        let v = self.call_in_page("function(k,n,v){return this.a2p.step(k,n,v);}", &args)?;
+        // `visitGroup` acts on the element that owns the id (see `Website::id_owner`).
+        let node = match kind {
+            ActionKind::Visit(_) => site.id_owner.get(node).map_or(node, |&o| o as usize),
+            _ => node,
+        };
+        let args = [json!(k), json!(node), val, json!(quirks.cc_bug)];
+        let v = self.call_in_page("function(k,n,v,b){return this.a2p.step(k,n,v,b);}", &args)?;
         ingest(&v, site, state)
     }
 

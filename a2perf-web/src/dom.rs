@@ -4,7 +4,9 @@
 //! The same [`DomState`] is filled by the Chromium backend from the real browser, so observations
 //! and rewards are computed by one piece of code for both backends.
 
-use crate::site::{Behaviour, Block, FALSE_ID, FieldKind, PAD, ROOT_WIDTH, TRUE_ID, Tag, Website};
+use crate::site::{
+    Behaviour, Block, FALSE_ID, FieldKind, ONE_ID, PAD, ROOT_WIDTH, TRUE_ID, Tag, Website,
+};
 
 /// What an action triggered on the page.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -18,13 +20,36 @@ pub enum Event {
     Submit,
 }
 
-/// The two action kinds.
+/// What an action does to its element.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ActionKind {
-    /// Click the element.
+    /// Click the element (as a user would: controls take the focus, a radio is checked).
     Click,
     /// Type a value (string id) into the element.
     Type(u32),
+    /// A2Perf's `visitGroup(id, value)` with an optional value (string id), the original's only
+    /// way of acting on a page: it acts on the first element carrying the element's `id`, and only
+    /// when that one is visible; it marks it `visited`; text/number/password inputs and selects get
+    /// the value (none clears them); a radio checks the button of its group holding the value
+    /// (none checks nothing) and marks the group visited; a checkbox is clicked (toggled) only
+    /// when the value is JavaScript-true (`true`, or `"1"` by loose equality); anything else is
+    /// clicked; elements without an id are left alone; nothing takes the focus.
+    Visit(Option<u32>),
+}
+
+/// Behaviours of the original A2Perf that the page reproduces on request.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Quirks {
+    /// A2Perf's radio-group lookup: the group is found from the concept between the first two
+    /// `_` of the radio's id, which is `credit` for `actionable_credit_card_type_p0_i0`, so the
+    /// `cc` (credit-card type) group is never found: acting on one of its buttons only marks that
+    /// button `visited` and never checks anything (the original's `cc` bug).
+    pub cc_bug: bool,
+    /// Render an active primitive again when a later page repeats it, as the original did:
+    /// a text input, select or checkbox copy shares the first copy's id, so the original read and
+    /// acted on the first one only (the copy holds no field); a radio-group copy has ids of its
+    /// own and works (its buttons join the field and share the first group's `name`).
+    pub duplicate_fields: bool,
 }
 
 /// Dynamic state of every element.
@@ -240,18 +265,101 @@ impl DomState {
         (0..site.fields.len()).all(|f| self.field_correct(site, f))
     }
 
+    /// Checks radio `i`, unchecking the others of its `name` (every copy of its field's group).
     fn check_radio(&mut self, site: &Website, i: usize) {
-        if let Some(f) = site.nodes[i].field {
-            for &r in &site.fields[usize::from(f)].nodes {
-                self.checked[r as usize] = false;
-            }
+        let node = &site.nodes[i];
+        let same_name = match (node.field, node.group) {
+            (Some(f), _) => site.fields[usize::from(f)].nodes.as_slice(),
+            (None, Some(g)) => site.radio_group(g),
+            (None, None) => &[],
+        };
+        for &r in same_name {
+            self.checked[r as usize] = false;
         }
         self.checked[i] = true;
     }
 
+    /// Whether acting on radio `i` finds its group (always, unless `quirks.cc_bug` and the
+    /// group's concept cannot be read from the radio's id).
+    fn radio_group_found(site: &Website, i: usize, quirks: Quirks) -> bool {
+        !quirks.cc_bug || site.nodes[i].group_from_id
+    }
+
+    /// What a click does besides focus: toggles a checkbox, checks a radio, and triggers the
+    /// element's behaviour (distractor, submit, next page, menu toggle).
+    fn press(&mut self, site: &Website, i: usize, quirks: Quirks) {
+        let node = &site.nodes[i];
+        match node.tag {
+            Tag::InputCheckbox => self.checked[i] = !self.checked[i],
+            Tag::InputRadio if Self::radio_group_found(site, i, quirks) => {
+                self.check_radio(site, i)
+            }
+            _ => {}
+        }
+        match node.behaviour {
+            Behaviour::Distractor if self.event == Event::None => {
+                self.event = Event::Distractor;
+            }
+            Behaviour::Submit if self.event == Event::None => self.event = Event::Submit,
+            Behaviour::Next(p) if p == self.page && usize::from(p) + 1 < site.pages.len() => {
+                self.focused = None;
+                self.hidden[site.pages[usize::from(p)] as usize] = true;
+                self.hidden[site.pages[usize::from(p) + 1] as usize] = false;
+                self.page = p + 1;
+                self.layout(site);
+            }
+            Behaviour::Toggle(t) => {
+                self.hidden[t as usize] = !self.hidden[t as usize];
+                self.layout(site);
+            }
+            _ => {}
+        }
+    }
+
+    /// Sets the value of a text/number/password input or a select as the browser does: a
+    /// number input keeps only valid numbers, a select only one of its options (else `""`).
+    fn set_value(&mut self, site: &Website, i: usize, v: u32) {
+        let node = &site.nodes[i];
+        self.value[i] = match node.tag {
+            Tag::Select if !node.options.contains(&v) => 0,
+            Tag::InputNumber
+                if !site
+                    .strings
+                    .get(v as usize)
+                    .is_some_and(|s| is_valid_number(s)) =>
+            {
+                0
+            }
+            _ => v,
+        };
+    }
+
+    /// Checks the radio of `i`'s group whose value is `v` and marks the group visited (or, when
+    /// the group cannot be found, marks only `i`).
+    fn set_radio(&mut self, site: &Website, i: usize, v: Option<u32>, quirks: Quirks) {
+        let Some(g) = site.nodes[i]
+            .group
+            .filter(|_| Self::radio_group_found(site, i, quirks))
+        else {
+            self.visited[i] = true;
+            return;
+        };
+        for &r in site.radio_group(g) {
+            let r = r as usize;
+            if Some(site.nodes[r].radio_value) == v {
+                self.check_radio(site, r);
+            }
+            self.visited[r] = true;
+        }
+    }
+
     /// Applies an action to element `i` with the simulated backend (the same rules as the page
     /// script in [`crate::site::SCRIPT`]). Invisible targets are ignored.
-    pub fn apply(&mut self, site: &Website, i: usize, kind: ActionKind) {
+    pub fn apply(&mut self, site: &Website, i: usize, kind: ActionKind, quirks: Quirks) {
+        if let ActionKind::Visit(v) = kind {
+            self.visit(site, i, v, quirks);
+            return;
+        }
         if !self.visible.get(i).copied().unwrap_or(false) {
             return;
         }
@@ -261,31 +369,7 @@ impl DomState {
                 if node.tag.is_control() {
                     self.focused = Some(i as u32);
                 }
-                match node.tag {
-                    Tag::InputCheckbox => self.checked[i] = !self.checked[i],
-                    Tag::InputRadio => self.check_radio(site, i),
-                    _ => {}
-                }
-                match node.behaviour {
-                    Behaviour::Distractor if self.event == Event::None => {
-                        self.event = Event::Distractor;
-                    }
-                    Behaviour::Submit if self.event == Event::None => self.event = Event::Submit,
-                    Behaviour::Next(p)
-                        if p == self.page && usize::from(p) + 1 < site.pages.len() =>
-                    {
-                        self.focused = None;
-                        self.hidden[site.pages[usize::from(p)] as usize] = true;
-                        self.hidden[site.pages[usize::from(p) + 1] as usize] = false;
-                        self.page = p + 1;
-                        self.layout(site);
-                    }
-                    Behaviour::Toggle(t) => {
-                        self.hidden[t as usize] = !self.hidden[t as usize];
-                        self.layout(site);
-                    }
-                    _ => {}
-                }
+                self.press(site, i, quirks);
                 if node.actionable() {
                     self.visited[i] = true;
                 }
@@ -296,34 +380,39 @@ impl DomState {
                 }
                 match node.tag {
                     Tag::InputCheckbox => self.checked[i] = v == TRUE_ID,
-                    Tag::InputRadio => {
-                        if let Some(f) = node.field {
-                            for &r in &site.fields[usize::from(f)].nodes {
-                                let r = r as usize;
-                                if site.nodes[r].radio_value == v {
-                                    self.check_radio(site, r);
-                                }
-                                self.visited[r] = true;
-                            }
-                        }
-                    }
-                    Tag::Select => {
-                        self.value[i] = if node.options.contains(&v) { v } else { 0 };
-                    }
-                    Tag::InputNumber => {
-                        let ok = site
-                            .strings
-                            .get(v as usize)
-                            .is_some_and(|s| is_valid_number(s));
-                        self.value[i] = if ok { v } else { 0 };
-                    }
-                    _ => self.value[i] = v,
+                    Tag::InputRadio => self.set_radio(site, i, Some(v), quirks),
+                    _ => self.set_value(site, i, v),
                 }
                 self.focused = Some(i as u32);
                 if node.actionable() {
                     self.visited[i] = true;
                 }
             }
+            ActionKind::Visit(_) => {}
+        }
+    }
+
+    /// A2Perf's `visitGroup` (see [`ActionKind::Visit`]).
+    fn visit(&mut self, site: &Website, i: usize, v: Option<u32>, quirks: Quirks) {
+        let Some(&owner) = site.id_owner.get(i) else {
+            return;
+        };
+        let i = owner as usize;
+        if site.nodes[i].html_id.is_empty() || !self.visible[i] {
+            return;
+        }
+        self.visited[i] = true;
+        match site.nodes[i].tag {
+            Tag::InputText | Tag::InputPassword | Tag::InputNumber | Tag::Select => {
+                self.set_value(site, i, v.unwrap_or(0));
+            }
+            Tag::InputRadio => self.set_radio(site, i, v, quirks),
+            Tag::InputCheckbox => {
+                if matches!(v, Some(TRUE_ID | ONE_ID)) {
+                    self.press(site, i, quirks);
+                }
+            }
+            _ => self.press(site, i, quirks),
         }
     }
 }

@@ -7,9 +7,10 @@ use a2perf_core::{Action, Env, EnvError, EnvSpec, Observation, RngStream, Space,
 
 use crate::chromium::{ChromiumBackend, ChromiumOptions};
 use crate::design::{Design, load_designs};
-use crate::dom::{ActionKind, DomState, Event};
+use crate::dom::{ActionKind, DomState, Event, Quirks};
 use crate::error::WebError;
 use crate::generator::{Limits, check_solvable, generate};
+use crate::legacy_random::a2perf_pool_indices;
 use crate::site::{Behaviour, Tag, Website};
 use crate::vocab::{Vocabulary, vocab_size};
 
@@ -29,6 +30,9 @@ pub const DOM_FEATURES: usize = 8;
 pub const TIMESTEP_PENALTY: f64 = 0.05;
 /// Penalty when the page did not change.
 pub const NO_CHANGE_PENALTY: f64 = 0.5;
+/// Observation field of the website's first profile field: field 0 is A2Perf's `_dummy`
+/// (present, key `_dummy`, no value), which A2Perf adds so that a profile is never empty.
+pub const FIELD_OFFSET: usize = 1;
 
 /// Which browser runs the pages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -37,6 +41,31 @@ pub enum BackendKind {
     Simulated,
     /// Headless Chromium through chromedriver.
     Chromium,
+}
+
+/// Where the website pool comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PoolKind {
+    /// Websites of the id's level that an optimal agent can finish within the limits: from the
+    /// generator, or from `designs_file` filtered by recomputed level and solvability.
+    Generated,
+    /// A2Perf's design file (`designs_file`, required) as it is, unfiltered, with the original's
+    /// seeded draw: the same designs as A2Perf's `WebNavigationEnv` for the same seed.
+    A2Perf,
+}
+
+/// How actions act on the page.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ActionSemantics {
+    /// A user's click or typing; only meaningful actions are legal (the mask) and an illegal one
+    /// is an error.
+    Masked,
+    /// A2Perf's `visitGroup` (see [`ActionKind::Visit`]): kind 1 with field f ≥ 1 acts with that
+    /// field's value, every other action with none; every (element, field ≤ fields) pair is in
+    /// the mask for both kinds, as in the original network's joint mask; any action of the space
+    /// is accepted, and one naming no element repeats the previous step's reward − 0.55 (the
+    /// original's stale `current_reward`).
+    A2Perf,
 }
 
 /// Configuration of a [`WebNavEnv`].
@@ -50,7 +79,7 @@ pub struct WebNavConfig {
     pub seed: u64,
     /// Backend.
     pub backend: BackendKind,
-    /// Profile fields in the observation (F).
+    /// Profile fields in the observation (F), field 0 being A2Perf's `_dummy`.
     pub num_fields: usize,
     /// Elements in the observation (E).
     pub num_elements: usize,
@@ -58,17 +87,35 @@ pub struct WebNavConfig {
     pub num_tokens: usize,
     /// Episode step limit.
     pub step_limit: usize,
-    /// Draw the pool from this A2Perf design file instead of the generator (designs of the
-    /// id's recomputed level that are solvable within the limits).
+    /// An A2Perf design file: with [`PoolKind::Generated`] the pool is drawn from its designs of
+    /// the id's recomputed level that are solvable within the limits; with [`PoolKind::A2Perf`]
+    /// from all of them.
     pub designs_file: Option<PathBuf>,
+    /// Where the pool comes from.
+    pub pool: PoolKind,
+    /// Reproduce A2Perf's unselectable `cc` radio group (see [`Quirks::cc_bug`]).
+    pub cc_bug: bool,
+    /// Render an active primitive repeated on a later page, as A2Perf did (see
+    /// [`Quirks::duplicate_fields`]).
+    pub duplicate_fields: bool,
+    /// Fill the observation's placeholder slot from the element's `placeholder` (A2Perf's is
+    /// always empty: its patched MiniWoB reads a key the page never sends).
+    pub placeholders: bool,
+    /// At the step limit, report `terminated` as well as `truncated` (A2Perf's
+    /// `terminated = done or truncated`).
+    pub limit_terminates: bool,
+    /// How actions act on the page.
+    pub actions: ActionSemantics,
 }
 
 impl WebNavConfig {
-    /// Defaults of A2Perf for `difficulty` (10 websites, seed 0, simulated backend).
+    /// Defaults for `difficulty` (10 websites, seed 0, simulated backend, A2Perf's sizes and
+    /// step limit, generated pool, corrected behaviour).
     ///
     /// ```
     /// let c = a2perf_web::WebNavConfig::new(2);
     /// assert_eq!((c.num_fields, c.num_elements, c.num_tokens, c.step_limit), (25, 250, 10, 25));
+    /// assert!(!c.cc_bug && c.placeholders);
     /// ```
     pub fn new(difficulty: u8) -> Self {
         Self {
@@ -81,15 +128,50 @@ impl WebNavConfig {
             num_tokens: DEFAULT_TOKENS,
             step_limit: STEP_LIMIT,
             designs_file: None,
+            pool: PoolKind::Generated,
+            cc_bug: false,
+            duplicate_fields: false,
+            placeholders: true,
+            limit_terminates: false,
+            actions: ActionSemantics::Masked,
         }
     }
 
-    /// The generator limits implied by the observation sizes.
+    /// The original's environment for `difficulty`: A2Perf's design file `designs_file` as it
+    /// is, and every switch that reproduces a behaviour of the original turned on.
+    ///
+    /// ```
+    /// let c = a2perf_web::WebNavConfig::a2perf(1, "01.json".into());
+    /// assert_eq!(c.pool, a2perf_web::PoolKind::A2Perf);
+    /// assert!(c.cc_bug && !c.placeholders && c.limit_terminates);
+    /// ```
+    pub fn a2perf(difficulty: u8, designs_file: PathBuf) -> Self {
+        Self {
+            designs_file: Some(designs_file),
+            pool: PoolKind::A2Perf,
+            cc_bug: true,
+            duplicate_fields: true,
+            placeholders: false,
+            limit_terminates: true,
+            actions: ActionSemantics::A2Perf,
+            ..Self::new(difficulty)
+        }
+    }
+
+    /// The generator limits implied by the observation sizes (one profile slot is `_dummy`).
     pub fn limits(&self) -> Limits {
         Limits {
             step_limit: self.step_limit,
             max_elements: self.num_elements,
-            max_fields: self.num_fields,
+            max_fields: self.num_fields.saturating_sub(FIELD_OFFSET),
+        }
+    }
+
+    /// The page behaviours of the original this configuration reproduces.
+    pub fn quirks(&self) -> Quirks {
+        Quirks {
+            cc_bug: self.cc_bug,
+            duplicate_fields: self.duplicate_fields,
         }
     }
 
@@ -106,8 +188,11 @@ impl WebNavConfig {
         if self.num_websites == 0 || self.num_websites > 100_000 {
             return bad("num_websites", "must be in 1..=100000");
         }
-        if self.num_fields == 0 || self.num_fields > 1000 {
-            return bad("num_fields", "must be in 1..=1000");
+        if self.num_fields < 2 || self.num_fields > 1000 {
+            return bad(
+                "num_fields",
+                "must be in 2..=1000 (field 0 is A2Perf's `_dummy`)",
+            );
         }
         if self.num_elements < 16 || self.num_elements > 10_000 {
             return bad("num_elements", "must be in 16..=10000");
@@ -123,41 +208,96 @@ impl WebNavConfig {
 
     /// The pool of designs this configuration plays.
     pub fn pool(&self) -> Result<Vec<Design>, WebError> {
+        self.pool_from_source().map(|(pool, _)| pool)
+    }
+
+    /// The pool and, when it comes from a design file, each design's index in that file.
+    pub fn pool_from_source(&self) -> Result<(Vec<Design>, Option<Vec<usize>>), WebError> {
         self.validate()?;
         let limits = self.limits();
-        match &self.designs_file {
-            None => Ok(
-                generate(self.difficulty, self.seed, self.num_websites, &limits)
-                    .into_iter()
-                    .map(|g| g.design)
-                    .collect(),
-            ),
-            Some(path) => {
-                let all = load_designs(path)?;
-                let mut ok: Vec<Design> = all
-                    .into_iter()
-                    .filter(|d| {
-                        d.level() == Some(self.difficulty) && check_solvable(d, &limits).is_ok()
+        let Some(path) = &self.designs_file else {
+            if self.pool == PoolKind::A2Perf {
+                return Err(WebError::Config {
+                    name: "designs".into(),
+                    reason: "pool = \"a2perf\" plays A2Perf's design files as they are: give the \
+                             path of the original's 01.json, 02.json or 03.json (this program \
+                             ships no third-party data)"
+                        .into(),
+                });
+            }
+            let pool = generate(self.difficulty, self.seed, self.num_websites, &limits)
+                .into_iter()
+                .map(|g| g.design)
+                .collect();
+            return Ok((pool, None));
+        };
+        let file = path.display().to_string();
+        let all = load_designs(path)?;
+        let picked: Vec<usize> = match self.pool {
+            PoolKind::A2Perf => {
+                if self.seed > u64::from(u32::MAX) {
+                    return Err(WebError::Config {
+                        name: "seed".into(),
+                        reason: format!(
+                            "{}: pool = \"a2perf\" draws like numpy's RandomState, whose seed \
+                             must be below 2^32",
+                            self.seed
+                        ),
+                    });
+                }
+                a2perf_pool_indices(self.seed, all.len(), self.num_websites).ok_or_else(|| {
+                    WebError::BadFile {
+                        path: file.clone(),
+                        reason: format!(
+                            "{} designs, {} websites requested",
+                            all.len(),
+                            self.num_websites
+                        ),
+                    }
+                })?
+            }
+            PoolKind::Generated => {
+                let mut ok: Vec<usize> = (0..all.len())
+                    .filter(|&i| {
+                        all[i].level() == Some(self.difficulty)
+                            && check_solvable(&all[i], &limits).is_ok()
                     })
                     .collect();
                 if ok.len() < self.num_websites {
                     return Err(WebError::BadFile {
-                        path: path.display().to_string(),
+                        path: file,
                         reason: format!(
-                            "only {} designs are solvable and of level {} (recomputed), {} requested",
+                            "only {} designs are solvable and of level {} (recomputed), {} \
+                             requested (pool = \"a2perf\" plays the file as it is)",
                             ok.len(),
                             self.difficulty,
                             self.num_websites
                         ),
                     });
                 }
-                // Like A2Perf, a seeded choice without replacement.
+                // A seeded choice without replacement.
                 let mut rng = RngStream::new(self.seed, "web-design-file-pool");
                 rng.shuffle(&mut ok);
                 ok.truncate(self.num_websites);
-                Ok(ok)
+                ok
+            }
+        };
+        let pool: Vec<Design> = picked.iter().map(|&i| all[i].clone()).collect();
+        // Unfiltered designs must still fit the observation's profile (the original crashed).
+        for (&i, d) in picked.iter().zip(&pool) {
+            let fields = d.unique_active().len();
+            if fields > limits.max_fields {
+                return Err(WebError::BadFile {
+                    path: file,
+                    reason: format!(
+                        "design {i} has {fields} profile fields; the observation holds {} \
+                         (num_fields − 1, field 0 being `_dummy`)",
+                        limits.max_fields
+                    ),
+                });
             }
         }
+        Ok((pool, Some(picked)))
     }
 }
 
@@ -173,9 +313,13 @@ pub struct WebNavEnv {
     prev: DomState,
     was_visible: Vec<bool>,
     potential: f64,
+    /// The last step's reward (A2Perf's `current_reward`, repeated by a stale step).
+    last_reward: f64,
     steps: usize,
     active: bool,
     done: bool,
+    /// Tokens of the `_dummy` key.
+    dummy_key: Vec<u32>,
     chrome: Option<Box<ChromiumBackend>>,
     chrome_opts: ChromiumOptions,
     restarts: u64,
@@ -188,9 +332,16 @@ fn box_space(shape: &[usize], high: f32) -> Space {
 impl WebNavEnv {
     /// Builds the environment from a configuration (launching Chromium for that backend).
     pub fn new(cfg: WebNavConfig) -> Result<Self, WebError> {
-        let pool = cfg.pool()?;
+        let (pool, indices) = cfg.pool_from_source()?;
         let id = crate::env_id(cfg.difficulty);
-        Self::with_pool(pool, cfg, &id)
+        let mut env = Self::with_pool(pool, cfg, &id)?;
+        if let Some(idx) = indices {
+            let list: Vec<String> = idx.iter().map(usize::to_string).collect();
+            env.spec
+                .metadata
+                .insert("pool_indices".into(), list.join(","));
+        }
+        Ok(env)
     }
 
     /// Builds the environment on an explicit pool of designs (the configuration's pool settings
@@ -211,6 +362,7 @@ impl WebNavEnv {
             ("dom_tokens".into(), box_space(&[e, DOM_ATTRIBUTES, t], v)),
             ("dom_features".into(), box_space(&[e, DOM_FEATURES], 1.0)),
             ("dom_mask".into(), box_space(&[e], 1.0)),
+            ("time_step".into(), box_space(&[1], 1.0)),
         ]);
         let mut metadata = BTreeMap::new();
         metadata.insert("vocab_size".into(), vocab_size().to_string());
@@ -231,10 +383,34 @@ impl WebNavEnv {
                 .map_or("generator".into(), |p| p.display().to_string()),
         );
         metadata.insert("pool_hash".into(), format!("{:016x}", pool_hash(&pool)));
+        let flag = |b: bool| if b { "true" } else { "false" }.to_string();
         metadata.insert(
-            "action_layout".into(),
-            "(element*F+field)*2+kind; kind 0 click (field 0 only), 1 type field value".into(),
+            "pool".into(),
+            match cfg.pool {
+                PoolKind::Generated => "generated",
+                PoolKind::A2Perf => "a2perf",
+            }
+            .into(),
         );
+        metadata.insert("cc_bug".into(), flag(cfg.cc_bug));
+        metadata.insert("duplicate_fields".into(), flag(cfg.duplicate_fields));
+        metadata.insert("placeholders".into(), flag(cfg.placeholders));
+        metadata.insert("limit_terminates".into(), flag(cfg.limit_terminates));
+        let (actions, layout) = match cfg.actions {
+            ActionSemantics::Masked => (
+                "masked",
+                "(element*F+field)*2+kind; field 0 is _dummy; kind 0 click (field 0 only), \
+                 1 type field value (field >= 1)",
+            ),
+            ActionSemantics::A2Perf => (
+                "a2perf",
+                "(element*F+field)*2+kind; field 0 is _dummy; A2Perf's visitGroup with field \
+                 value (kind 1, field >= 1) or none (other); A2Perf index = (1-kind)*F*E + \
+                 field*E + element",
+            ),
+        };
+        metadata.insert("actions".into(), actions.into());
+        metadata.insert("action_layout".into(), layout.into());
         let spec = EnvSpec {
             id: id.into(),
             observation_space,
@@ -263,9 +439,11 @@ impl WebNavEnv {
             prev: DomState::default(),
             was_visible: Vec::new(),
             potential: 0.0,
+            last_reward: 0.0,
             steps: 0,
             active: false,
             done: false,
+            dummy_key: Vocabulary::standard().encode("_dummy"),
             chrome,
             chrome_opts,
             restarts: 0,
@@ -297,6 +475,11 @@ impl WebNavEnv {
         &self.state
     }
 
+    /// Steps taken in the current episode.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
     /// How often the browser was restarted after dying.
     pub fn browser_restarts(&self) -> u64 {
         self.restarts
@@ -319,22 +502,55 @@ impl WebNavEnv {
         (a / (2 * self.cfg.num_fields), field, kind)
     }
 
-    /// Whether flat action `a` is legal now: the element slot holds a visible element; clicks
-    /// use field 0 only (the field is irrelevant to a click); typing needs a control (input or
-    /// select) and a present profile field.
+    /// The index of flat action `a` in the original's layout, `type·F·E + field·E + element`,
+    /// where A2Perf's type 0 acts with the field's value and type 1 with none (our kind 1 and 0).
+    ///
+    /// ```
+    /// let env = a2perf_web::WebNavEnv::new(a2perf_web::WebNavConfig::new(1)).unwrap();
+    /// let ours = env.action_index(7, 3, 1); // type field 3 into element 7
+    /// assert_eq!(env.a2perf_action(ours), 3 * 250 + 7);
+    /// assert_eq!(env.from_a2perf_action(3 * 250 + 7), Some(ours));
+    /// ```
+    pub fn a2perf_action(&self, a: usize) -> usize {
+        let (e, f, kind) = self.decode_action(a);
+        (1 - kind) * self.cfg.num_fields * self.cfg.num_elements + f * self.cfg.num_elements + e
+    }
+
+    /// The flat action of the original's index `a` (inverse of [`Self::a2perf_action`]); `None`
+    /// outside the action space.
+    pub fn from_a2perf_action(&self, a: usize) -> Option<usize> {
+        let (f, e) = (self.cfg.num_fields, self.cfg.num_elements);
+        (a < 2 * f * e).then(|| self.action_index(a % e, (a / e) % f, 1 - a / (f * e)))
+    }
+
+    /// Number of elements the observation shows now.
+    fn shown(&self) -> usize {
+        self.state.order.len().min(self.cfg.num_elements)
+    }
+
+    /// Whether flat action `a` is in the mask now. [`ActionSemantics::Masked`]: the element
+    /// slot holds a visible element; clicks use field 0 (`_dummy`) only; typing needs a control
+    /// (input or select) and a present profile field (≥ 1). [`ActionSemantics::A2Perf`]: the
+    /// original network's joint mask, a visible element and a present field (`_dummy`
+    /// included), both kinds.
     pub fn is_legal(&self, a: usize) -> bool {
         if a >= self.cfg.num_elements * self.cfg.num_fields * 2 {
             return false;
         }
         let (e, f, kind) = self.decode_action(a);
-        let Some(&node) = self.state.order.get(e) else {
+        if e >= self.shown() {
             return false;
-        };
-        if kind == 0 {
-            f == 0
-        } else {
-            f < self.site.fields.len().min(self.cfg.num_fields)
-                && self.site.nodes[node as usize].tag.is_control()
+        }
+        let fields = self.site.fields.len() + FIELD_OFFSET;
+        match self.cfg.actions {
+            ActionSemantics::A2Perf => f < fields,
+            ActionSemantics::Masked if kind == 0 => f == 0,
+            ActionSemantics::Masked => {
+                (FIELD_OFFSET..fields).contains(&f)
+                    && self.site.nodes[self.state.order[e] as usize]
+                        .tag
+                        .is_control()
+            }
         }
     }
 
@@ -354,11 +570,11 @@ impl WebNavEnv {
             let node = &self.site.nodes[n as usize];
             if let Some(f) = node.field {
                 let f = usize::from(f);
-                if f < self.cfg.num_fields
+                if f + FIELD_OFFSET < self.cfg.num_fields
                     && !(self.state.field_correct(&self.site, f)
                         && self.state.field_visited(&self.site, f))
                 {
-                    return Some(self.action_index(slot, f, 1));
+                    return Some(self.action_index(slot, f + FIELD_OFFSET, 1));
                 }
             }
         }
@@ -387,16 +603,18 @@ impl WebNavEnv {
             "dom_tokens",
             "dom_features",
             "dom_mask",
+            "time_step",
         ];
-        let shapes: [&[usize]; 6] = [
+        let shapes: [&[usize]; 7] = [
             &[f, t],
             &[f, t],
             &[f],
             &[e, DOM_ATTRIBUTES, t],
             &[e, DOM_FEATURES],
             &[e],
+            &[1],
         ];
-        let fits = obs.tensors.len() == 6
+        let fits = obs.tensors.len() == names.len()
             && obs
                 .tensors
                 .iter()
@@ -409,7 +627,7 @@ impl WebNavEnv {
                 .map(|(n, s)| Tensor::zeros(n, s))
                 .collect();
         }
-        let [pk, pv, pm, dt, df, dm] = &mut obs.tensors[..] else {
+        let [pk, pv, pm, dt, df, dm, ts] = &mut obs.tensors[..] else {
             return;
         };
         fn put(dst: &mut [f32], src: &[u32]) {
@@ -422,26 +640,29 @@ impl WebNavEnv {
                 &mut pk.data[k * t..(k + 1) * t],
                 &mut pv.data[k * t..(k + 1) * t],
             );
-            match self.site.profile_tokens.get(k) {
-                Some((ka, va)) => {
-                    put(keys, ka);
-                    put(vals, va);
-                    pm.data[k] = 1.0;
-                }
-                None => {
-                    put(keys, &[]);
-                    put(vals, &[]);
-                    pm.data[k] = 0.0;
-                }
-            }
+            // `_dummy`'s value is None, which the original's tokenizer maps to no token.
+            let field = match k.checked_sub(FIELD_OFFSET) {
+                None => Some((self.dummy_key.as_slice(), &[][..])),
+                Some(j) => self
+                    .site
+                    .profile_tokens
+                    .get(j)
+                    .map(|(ka, va)| (ka.as_slice(), va.as_slice())),
+            };
+            let (ka, va) = field.unwrap_or((&[], &[]));
+            put(keys, ka);
+            put(vals, va);
+            pm.data[k] = f32::from(u8::from(field.is_some()));
         }
+        // A2Perf: `float(num_steps) / float(step_limit)`.
+        ts.data[0] = self.steps as f32 / self.cfg.step_limit as f32;
         let (mut max_w, mut max_h) = (1.0f32, 1.0f32);
         for &n in &self.state.order {
             let r = self.state.rect[n as usize];
             max_w = max_w.max(r[0] + r[2]);
             max_h = max_h.max(r[1] + r[3]);
         }
-        let shown = self.state.order.len().min(e);
+        let shown = self.shown();
         for slot in 0..e {
             let toks = &mut dt.data[slot * DOM_ATTRIBUTES * t..(slot + 1) * DOM_ATTRIBUTES * t];
             let feats = &mut df.data[slot * DOM_FEATURES..(slot + 1) * DOM_FEATURES];
@@ -455,10 +676,15 @@ impl WebNavEnv {
             let nt = &self.site.tokens[n];
             let visited = self.state.visited[n];
             let value = self.state.value_id(&self.site, n) as usize;
+            let placeholder: &[u32] = if self.cfg.placeholders {
+                &nt.placeholder
+            } else {
+                &[]
+            };
             put(&mut toks[0..t], &nt.tag);
             put(&mut toks[t..2 * t], &self.site.string_tokens[value]);
             put(&mut toks[2 * t..3 * t], &nt.text);
-            put(&mut toks[3 * t..4 * t], &nt.placeholder);
+            put(&mut toks[3 * t..4 * t], placeholder);
             put(&mut toks[4 * t..5 * t], &nt.classes[usize::from(visited)]);
             let r = self.state.rect[n];
             feats[0] = f32::from(u8::from(self.state.focused == Some(n as u32)));
@@ -476,13 +702,20 @@ impl WebNavEnv {
         let mask = obs.action_mask.get_or_insert_with(Vec::new);
         mask.clear();
         mask.resize(n_actions, false);
-        let fields = self.site.fields.len().min(f);
+        let fields = (self.site.fields.len() + FIELD_OFFSET).min(f);
         for slot in 0..shown {
-            mask[(slot * f) * 2] = true;
-            let n = self.state.order[slot] as usize;
-            if self.site.nodes[n].tag.is_control() {
-                for k in 0..fields {
-                    mask[(slot * f + k) * 2 + 1] = true;
+            match self.cfg.actions {
+                ActionSemantics::Masked => {
+                    mask[(slot * f) * 2] = true;
+                    let n = self.state.order[slot] as usize;
+                    if self.site.nodes[n].tag.is_control() {
+                        for k in FIELD_OFFSET..fields {
+                            mask[(slot * f + k) * 2 + 1] = true;
+                        }
+                    }
+                }
+                ActionSemantics::A2Perf => {
+                    mask[slot * f * 2..(slot * f + fields) * 2].fill(true);
                 }
             }
         }
@@ -596,10 +829,11 @@ impl WebNavEnv {
 
     fn start_episode(&mut self, index: usize, obs: &mut Observation) -> Result<(), EnvError> {
         self.pool_index = index;
-        self.site = Website::build(
+        self.site = Website::build_with(
             &self.pool[self.pool_index],
             &mut self.rng,
             Vocabulary::standard(),
+            self.cfg.quirks(),
         );
         self.state.reset(&self.site);
         self.load_in_browser()?;
@@ -607,6 +841,7 @@ impl WebNavEnv {
         self.was_visible.clear();
         self.was_visible.resize(self.site.nodes.len(), false);
         self.potential = self.state.potential(&self.site);
+        self.last_reward = 0.0;
         self.steps = 0;
         self.active = true;
         self.done = false;
@@ -627,27 +862,45 @@ impl WebNavEnv {
                 });
             }
         };
-        if !self.is_legal(a) {
+        let n_actions = self.cfg.num_elements * self.cfg.num_fields * 2;
+        let a2perf = self.cfg.actions == ActionSemantics::A2Perf;
+        if !(self.is_legal(a) || a2perf && a < n_actions) {
             return Err(EnvError::InvalidAction {
                 action: action.clone(),
-                reason: "masked out (no such element, click with field > 0, or typing into a \
-                         non-input / absent field)"
-                    .into(),
+                reason: if a >= n_actions {
+                    format!("outside Discrete({n_actions})")
+                } else {
+                    "masked out (no such element, click with field > 0, or typing into a \
+                     non-input / absent field)"
+                        .into()
+                },
             });
         }
         let (slot, field, kind) = self.decode_action(a);
+        if slot >= self.shown() {
+            // Only A2Perf's semantics get here: the original looked the element up, found none
+            // and returned early, leaving the page and `current_reward` as they were.
+            self.stale_step(out);
+            return Ok(());
+        }
         let node = self.state.order[slot] as usize;
-        let kind = if kind == 0 {
-            ActionKind::Click
-        } else {
-            ActionKind::Type(self.site.fields[field].value_id)
+        let value = field
+            .checked_sub(FIELD_OFFSET)
+            .and_then(|f| self.site.fields.get(f))
+            .map(|f| f.value_id)
+            .filter(|_| kind == 1);
+        let kind = match (self.cfg.actions, value) {
+            (ActionSemantics::A2Perf, v) => ActionKind::Visit(v),
+            (ActionSemantics::Masked, Some(v)) => ActionKind::Type(v),
+            (ActionSemantics::Masked, None) => ActionKind::Click,
         };
+        let quirks = self.cfg.quirks();
         self.prev.copy_from(&self.state);
         let event_before = self.state.event;
         match self.chrome.as_deref_mut() {
-            None => self.state.apply(&self.site, node, kind),
+            None => self.state.apply(&self.site, node, kind, quirks),
             Some(chrome) => {
-                if let Err(e) = chrome.step(&mut self.site, &mut self.state, node, kind) {
+                if let Err(e) = chrome.step(&mut self.site, &mut self.state, node, kind, quirks) {
                     if !e.is_browser_death() {
                         return Err(e.into());
                     }
@@ -699,13 +952,44 @@ impl WebNavEnv {
                 false
             }
         };
-        let truncated = !terminated && self.steps >= self.cfg.step_limit;
+        self.finish_step(out, reward, terminated, [success, distractor, 0.0, phi]);
+        Ok(())
+    }
+
+    /// A step that changed nothing and repeats the previous step's reward − 0.55 (A2Perf's
+    /// early return for an element index beyond the page's elements).
+    fn stale_step(&mut self, out: &mut Step) {
+        self.steps += 1;
+        // The page is unchanged: ΔΦ = 0, no event, and the diff is empty.
+        let reward = self.last_reward - NO_CHANGE_PENALTY - TIMESTEP_PENALTY;
+        self.finish_step(out, reward, false, [0.0, 0.0, 0.0, self.potential]);
+    }
+
+    /// Termination flags, the observation and info of a step whose reward is known.
+    fn finish_step(&mut self, out: &mut Step, reward: f64, event: bool, info: [f64; 4]) {
+        let at_limit = self.steps >= self.cfg.step_limit;
+        // A2Perf: `truncated = num_steps >= step_limit; terminated = done or truncated`.
+        let (terminated, truncated) = if self.cfg.limit_terminates {
+            (event || at_limit, at_limit)
+        } else {
+            (event, !event && at_limit)
+        };
         self.done = terminated || truncated;
+        self.last_reward = reward;
         out.reward = reward;
         out.terminated = terminated;
         out.truncated = truncated;
         self.write_observation(&mut out.observation);
-        set_info(out, [success, distractor, 0.0, phi, self.pool_index as f64]);
-        Ok(())
+        let [success, distractor, interrupted, phi] = info;
+        set_info(
+            out,
+            [
+                success,
+                distractor,
+                interrupted,
+                phi,
+                self.pool_index as f64,
+            ],
+        );
     }
 }

@@ -15,7 +15,7 @@ pub struct Limits {
     pub step_limit: usize,
     /// Elements the observation holds (A2Perf: 250); every page must fit, hidden ones included.
     pub max_elements: usize,
-    /// Profile fields the observation holds (A2Perf: 25).
+    /// Profile fields the observation holds besides `_dummy` (A2Perf: 25 − 1).
     pub max_fields: usize,
 }
 
@@ -24,7 +24,7 @@ impl Default for Limits {
         Self {
             step_limit: 25,
             max_elements: 250,
-            max_fields: 25,
+            max_fields: 24,
         }
     }
 }

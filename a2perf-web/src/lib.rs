@@ -24,21 +24,39 @@
 //!
 //! | tensor | shape | content |
 //! |---|---|---|
-//! | `profile_keys`, `profile_values` | [F, T] | tokens of the profile fields, sorted by key |
-//! | `profile_mask` | \[F\] | 1 = field present |
+//! | `profile_keys`, `profile_values` | [F, T] | field 0: A2Perf's `_dummy` (key `_dummy`, no value); fields 1..: the profile, sorted by key |
+//! | `profile_mask` | \[F\] | 1 = field present (`_dummy` always) |
 //! | `dom_tokens` | [E, 5, T] | per visible element (document order): tag, value, text, placeholder, classes |
 //! | `dom_features` | [E, 8] | focused, tampered (acted on), new (not visible before), is_div, x, y, w, h |
 //! | `dom_mask` | \[E\] | 1 = element present |
+//! | `time_step` | \[1\] | steps taken / step limit (A2Perf's `time_step`) |
 //!
 //! Geometry is divided by the largest right / bottom edge of the page, so it lies in [0, 1].
 //! The action is `Discrete(E·F·2)`, flat index `(element·F + field)·2 + kind`, kind 0 = click,
-//! 1 = type the field's profile value into the element. The action mask allows clicks only with
-//! field 0 (the field does not matter to a click) and typing only into inputs/selects with a
-//! present field.
+//! 1 = type the field's profile value into the element ([`WebNavEnv::a2perf_action`] maps it to
+//! the original's index). The action mask allows clicks only with field 0 (`_dummy`: the field
+//! does not matter to a click) and typing only into inputs/selects with a present field ≥ 1.
 //!
 //! Reward per step: `ΔΦ − 0.05 − 0.5·[page unchanged]` while running, where Φ is the share of
 //! fields that were acted on and hold their gold value; at submit `ΔΦ ± 1` (+1 iff every field is
 //! correct); a distractor click gives `ΔΦ − 1` and ends the episode; 25 steps truncate.
+//!
+//! ## The original's behaviour, on request
+//!
+//! By default the environment corrects the original's bugs (the unselectable `cc` radio group,
+//! unsolvable step budgets, shuffled level files, an empty placeholder slot, run-time vocabulary
+//! growth, unseeded episode draws). Each difference that changes what an agent sees or gets has a
+//! switch (an environment parameter) that reproduces A2Perf; [`WebNavConfig::a2perf`] turns them
+//! all on:
+//!
+//! | parameter | default | A2Perf |
+//! |---|---|---|
+//! | `pool` (+ `designs`) | `generated`: solvable websites of the id's level | `a2perf`: the original's 0N.json as it is, drawn like numpy's `RandomState(seed)` |
+//! | `cc_bug` | `false` | `true`: the `cc` radio group can never be selected |
+//! | `duplicate_fields` | `false` | `true`: an active primitive repeated on a later page is rendered (inputs dead, radio groups working) |
+//! | `placeholders` | `true` | `false`: the placeholder slot is always empty |
+//! | `limit_terminates` | `false` | `true`: the step limit sets `terminated` too |
+//! | `actions` | `masked` | `a2perf`: `visitGroup` semantics, the joint mask, the stale reward |
 //!
 //! ```
 //! use a2perf_core::{Action, Env};
@@ -57,11 +75,9 @@
 //! assert!(ret > 1.0);
 //! ```
 //!
-//! It deliberately does not reproduce the original's bugs (the unselectable `cc` radio group,
-//! unsolvable step budgets, run-time vocabulary growth, unseeded episode draws, the stale reward
-//! on out-of-range element indices) nor its Bootstrap/jQuery look: pages are plain HTML with a
-//! layout chosen so geometry is exact in both backends. It does not learn; agents live in
-//! `a2perf-baselines`.
+//! It does not reproduce the original's Bootstrap/jQuery look (pages are plain HTML with a
+//! layout chosen so geometry is exact in both backends), its wall-clock episode timer or its
+//! run-time vocabulary. It does not learn; agents live in `a2perf-baselines`.
 
 #![warn(missing_docs)]
 
@@ -71,6 +87,7 @@ pub mod dom;
 pub mod env;
 pub mod error;
 pub mod generator;
+pub mod legacy_random;
 pub mod primitives;
 pub mod site;
 pub mod vocab;
@@ -86,8 +103,8 @@ pub use chromium::{
     other_browser_processes,
 };
 pub use design::{Design, level_of_probability, load_designs, page_difficulty, parse_designs};
-pub use dom::{ActionKind, DomState, Event};
-pub use env::{BackendKind, WebNavConfig, WebNavEnv};
+pub use dom::{ActionKind, DomState, Event, Quirks};
+pub use env::{ActionSemantics, BackendKind, PoolKind, WebNavConfig, WebNavEnv};
 pub use error::WebError;
 pub use generator::{
     DesignReport, Generated, Limits, Unsolvable, check_solvable, generate, report, sample_design,
@@ -128,7 +145,7 @@ fn params() -> Vec<ParamSpec> {
             "num_fields",
             ParamKind::Int,
             Value::Int(env::DEFAULT_FIELDS as i64),
-            "profile fields in the observation (F)",
+            "profile fields in the observation (F), field 0 being A2Perf's `_dummy`",
         ),
         ParamSpec::new(
             "num_elements",
@@ -152,7 +169,47 @@ fn params() -> Vec<ParamSpec> {
             "designs",
             ParamKind::Path,
             Value::Null,
-            "A2Perf design JSON to draw the pool from instead of the generator",
+            "A2Perf design JSON (its 01/02/03.json): with pool = generated, its solvable designs \
+             of the id's recomputed level; with pool = a2perf, all of them",
+        ),
+        ParamSpec::new(
+            "pool",
+            ParamKind::Choice(&["generated", "a2perf"]),
+            Value::Str("generated".into()),
+            "generated: solvable websites of the id's level; a2perf: the `designs` file as it is, \
+             drawn like A2Perf (same designs for the same seed)",
+        ),
+        ParamSpec::new(
+            "cc_bug",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "true: A2Perf's cc (credit-card type) radio group can never be selected",
+        ),
+        ParamSpec::new(
+            "duplicate_fields",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "true: render an active primitive repeated on a later page, as A2Perf did (inputs \
+             dead, radio groups working)",
+        ),
+        ParamSpec::new(
+            "placeholders",
+            ParamKind::Bool,
+            Value::Bool(true),
+            "fill the observation's placeholder slot (false: always empty, as in A2Perf)",
+        ),
+        ParamSpec::new(
+            "limit_terminates",
+            ParamKind::Bool,
+            Value::Bool(false),
+            "true: the step limit sets terminated as well as truncated, as in A2Perf",
+        ),
+        ParamSpec::new(
+            "actions",
+            ParamKind::Choice(&["masked", "a2perf"]),
+            Value::Str("masked".into()),
+            "masked: click/type, meaningful actions only; a2perf: A2Perf's visitGroup, every \
+             (element, field) allowed, stale reward on a missing element",
         ),
     ]
 }
@@ -174,6 +231,18 @@ fn config_from(level: u8, p: &Params) -> Result<WebNavConfig, EnvError> {
     c.num_tokens = p.usize("num_tokens").map_err(e)?;
     c.step_limit = p.usize("step_limit").map_err(e)?;
     c.designs_file = p.opt_str("designs").map_err(e)?.map(PathBuf::from);
+    c.pool = match p.str("pool").map_err(e)? {
+        "a2perf" => PoolKind::A2Perf,
+        _ => PoolKind::Generated,
+    };
+    c.cc_bug = p.bool("cc_bug").map_err(e)?;
+    c.duplicate_fields = p.bool("duplicate_fields").map_err(e)?;
+    c.placeholders = p.bool("placeholders").map_err(e)?;
+    c.limit_terminates = p.bool("limit_terminates").map_err(e)?;
+    c.actions = match p.str("actions").map_err(e)? {
+        "a2perf" => ActionSemantics::A2Perf,
+        _ => ActionSemantics::Masked,
+    };
     Ok(c)
 }
 
@@ -193,7 +262,7 @@ pub fn register(reg: &mut Registry) {
             id: env_id(level),
             domain: DOMAIN.into(),
             summary: format!(
-                "fill gMiniWoB web forms from a profile, difficulty level {level} (generated, solvable websites)"
+                "fill gMiniWoB web forms from a profile, difficulty level {level} (generated, solvable websites; pool = a2perf plays A2Perf's design files)"
             ),
             params: params(),
             make: Arc::new(move |p: &Params| {

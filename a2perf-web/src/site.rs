@@ -4,11 +4,13 @@
 //! (containers: 2 px padding, leaves: fixed height, full width, no margins or borders), so the
 //! simulated layout in [`crate::dom`] reproduces Chromium's `getBoundingClientRect` exactly.
 
+use std::collections::HashMap;
 use std::fmt::Write as _;
 
 use a2perf_core::RngStream;
 
 use crate::design::Design;
+use crate::dom::Quirks;
 use crate::primitives::{Primitive, ProfileValue};
 use crate::vocab::Vocabulary;
 
@@ -197,6 +199,9 @@ pub struct Node {
     pub group: Option<u32>,
     /// Profile field this element holds, if any.
     pub field: Option<u16>,
+    /// Radios: whether A2Perf's lookup finds the group from the id (the concept between the
+    /// id's first two `_` names the group's root class); false for `cc` (see [`crate::dom::Quirks`]).
+    pub group_from_id: bool,
 }
 
 impl Node {
@@ -215,6 +220,7 @@ impl Node {
             radio_value: 0,
             group: None,
             field: None,
+            group_from_id: false,
         }
     }
 
@@ -284,18 +290,38 @@ pub struct Website {
     pub profile_tokens: Vec<(Vec<u32>, Vec<u32>)>,
     /// Indices of all controls (inputs and selects).
     pub controls: Vec<u32>,
+    /// Radio buttons of each radio group (the index is [`Node::group`]).
+    pub radio_groups: Vec<Vec<u32>>,
+    /// For every element, the element A2Perf's `visitGroup` acts on when given its `id`: the
+    /// first (in document order) with the same `id`, except that a page's next/submit button
+    /// owns its id; itself when its id is unique or empty.
+    pub id_owner: Vec<u32>,
 }
 
 /// String id of `"true"`.
 pub const TRUE_ID: u32 = 1;
 /// String id of `"false"`.
 pub const FALSE_ID: u32 = 2;
+/// String id of `"1"` (loosely equal to `true` in JavaScript, which A2Perf's checkbox rule uses).
+pub const ONE_ID: u32 = 3;
+
+/// The concept A2Perf's `visitGroup` reads from an element id: the text between its first two
+/// `_` (`actionable_credit_card_type_p0_i0` → `credit`).
+///
+/// ```
+/// assert_eq!(a2perf_web::site::concept_from_id("actionable_cabin_p1_i0"), "cabin");
+/// assert_eq!(a2perf_web::site::concept_from_id("actionable_credit_card_type_p0_i1"), "credit");
+/// ```
+pub fn concept_from_id(id: &str) -> &str {
+    let rest = id.find('_').map_or("", |k| &id[k + 1..]);
+    rest.find('_').map_or("", |k| &rest[..k])
+}
 
 struct Builder<'a> {
     nodes: Vec<Node>,
     strings: Vec<String>,
     page: usize,
-    groups: u32,
+    radio_groups: Vec<Vec<u32>>,
     rng: &'a mut RngStream,
 }
 
@@ -385,11 +411,12 @@ impl Builder<'_> {
         if !header.is_empty() {
             self.leaf(Tag::H6, header, "mb-3", "", Behaviour::Inert);
         }
-        // The group class is the concept itself: the original parsed it from the id and broke on
-        // concepts containing `_` (`credit_card_type` → `credit`), which made `cc` unsolvable.
+        // The group's root class is `{concept}root`, as in the original, whose lookup parsed the
+        // concept from the radio's id and so broke on concepts containing `_`
+        // (`credit_card_type` → `credit`); `group_from_id` records whether that lookup succeeds.
         let inner = self.open(Tag::Div, &format!("d-block my-3 {concept}root"), "");
-        let group = self.groups;
-        self.groups += 1;
+        let group = self.radio_groups.len() as u32;
+        self.radio_groups.push(Vec::new());
         let mut out = Vec::new();
         for (k, opt) in options.iter().enumerate() {
             let w = self.open(
@@ -404,8 +431,11 @@ impl Builder<'_> {
                 &format!("actionable_{concept}_p{p}_i{k}"),
             );
             let v = self.intern(opt);
-            self.nodes[i as usize].radio_value = v;
-            self.nodes[i as usize].group = Some(group);
+            let node = &mut self.nodes[i as usize];
+            node.radio_value = v;
+            node.group = Some(group);
+            node.group_from_id = concept_from_id(&node.html_id) == concept;
+            self.radio_groups[group as usize].push(i);
             self.leaf(
                 Tag::Label,
                 opt,
@@ -734,8 +764,9 @@ impl Website {
     /// Builds the website of `design` with this episode's random content (profile values, prices,
     /// carousel slide) drawn from `rng`.
     ///
-    /// Rules where the original was ambiguous or broken: a second instance of an active concept is
-    /// not rendered (the original gave it a duplicate id, so only the first was usable); repeated
+    /// Rules where the original was ambiguous or broken: a second instance of an active concept on
+    /// a later page is not rendered (the original gave an input copy the first copy's id, so
+    /// only the first was usable; [`Website::build_with`] renders it on request); repeated
     /// (primitive, page) pairs are rendered once (as `design_environment` does); on each page but
     /// the last, the first `next_*` button is the page's "next" control (default text "Next")
     /// and any other is a dead button; on the last page the first `submit` is the submit control
@@ -752,11 +783,22 @@ impl Website {
     /// assert!(site.to_html(false).contains("Payment"));
     /// ```
     pub fn build(design: &Design, rng: &mut RngStream, vocab: &Vocabulary) -> Website {
+        Self::build_with(design, rng, vocab, Quirks::default())
+    }
+
+    /// [`Website::build`] with the original's page behaviours that `quirks` asks for (of which
+    /// [`Quirks::duplicate_fields`] changes the elements; the random content is the same).
+    pub fn build_with(
+        design: &Design,
+        rng: &mut RngStream,
+        vocab: &Vocabulary,
+        quirks: Quirks,
+    ) -> Website {
         let mut b = Builder {
             nodes: Vec::new(),
-            strings: vec![String::new(), "true".into(), "false".into()],
+            strings: vec![String::new(), "true".into(), "false".into(), "1".into()],
             page: 0,
-            groups: 0,
+            radio_groups: Vec::new(),
             rng,
         };
         let mut placed: Vec<(Primitive, Vec<u32>)> = Vec::new();
@@ -773,7 +815,10 @@ impl Website {
                     continue;
                 }
                 seen.push(prim);
-                if prim.info().active && placed.iter().any(|(q, _)| *q == prim) {
+                if prim.info().active
+                    && !quirks.duplicate_fields
+                    && placed.iter().any(|(q, _)| *q == prim)
+                {
                     continue;
                 }
                 list.push(prim);
@@ -807,7 +852,19 @@ impl Website {
                 }
                 let nodes = b.primitive(prim);
                 if prim.info().active {
-                    placed.push((prim, nodes));
+                    match placed.iter_mut().find(|(q, _)| *q == prim) {
+                        // A later page's copy: a radio group (ids with the page) joins the
+                        // field; another control shares the first copy's id and holds nothing.
+                        Some((_, first)) => {
+                            if nodes
+                                .first()
+                                .is_some_and(|&n| b.nodes[n as usize].tag == Tag::InputRadio)
+                            {
+                                first.extend(nodes);
+                            }
+                        }
+                        None => placed.push((prim, nodes)),
+                    }
                 }
             }
             let (concept, text, beh) = match (last, nav) {
@@ -848,7 +905,12 @@ impl Website {
                 nodes: nodes.clone(),
             });
         }
-        let Builder { nodes, strings, .. } = b;
+        let Builder {
+            nodes,
+            strings,
+            radio_groups,
+            ..
+        } = b;
         let string_tokens = strings.iter().map(|s| vocab.encode(s)).collect();
         let tokens = nodes
             .iter()
@@ -879,6 +941,26 @@ impl Website {
             .filter(|(_, n)| n.tag.is_control())
             .map(|(i, _)| i as u32)
             .collect();
+        // A page's extra `next_*` (or `submit`) buttons share the working button's id; the
+        // original bound the transition to the first element with that id and `visitGroup`
+        // acts on the first, so any of them works: the working button owns the id.
+        let mut first_with: HashMap<&str, u32> = nodes
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| matches!(n.behaviour, Behaviour::Next(_) | Behaviour::Submit))
+            .map(|(i, n)| (n.html_id.as_str(), i as u32))
+            .collect();
+        let id_owner = nodes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                if n.html_id.is_empty() {
+                    i as u32
+                } else {
+                    *first_with.entry(n.html_id.as_str()).or_insert(i as u32)
+                }
+            })
+            .collect();
         Website {
             design: design.clone(),
             nodes,
@@ -889,7 +971,14 @@ impl Website {
             tokens,
             profile_tokens,
             controls,
+            radio_groups,
+            id_owner,
         }
+    }
+
+    /// Radio buttons of group `g` (empty for an unknown group).
+    pub fn radio_group(&self, g: u32) -> &[u32] {
+        self.radio_groups.get(g as usize).map_or(&[], Vec::as_slice)
     }
 
     /// Initial value string id of element `i` (selects show their first option).
@@ -996,7 +1085,15 @@ impl Website {
             h.push('"');
         }
         if let Some(g) = n.group {
-            let _ = write!(h, " name=\"radio{g}\" value=\"");
+            // Copies of a field's radio group share one name, as in the original.
+            match n.field {
+                Some(f) => {
+                    let _ = write!(h, " name=\"field{f}\" value=\"");
+                }
+                None => {
+                    let _ = write!(h, " name=\"radio{g}\" value=\"");
+                }
+            }
             escape_into(h, &self.strings[n.radio_value as usize]);
             h.push('"');
         }
@@ -1117,19 +1214,49 @@ pub const SCRIPT: &str = r#"(function () {
     if (ae && ae.dataset && ae.dataset.n !== undefined) f = +ae.dataset.n;
     return { v: v, c: c, x: x, w: w, f: f, p: a2p.page, e: a2p.event };
   };
-  a2p.step = function (kind, n, val) {
+  // The radios of el's group (under its root, two levels up); null when A2Perf's lookup (the
+  // concept between the id's first two '_' names the root's class) fails and ccBug asks for it.
+  function groupOf(el, ccBug) {
+    var root = el.parentElement && el.parentElement.parentElement;
+    if (ccBug) {
+      var c = el.id.substring(el.id.indexOf('_') + 1);
+      c = c.substring(0, c.indexOf('_'));
+      root = c ? el.closest('.' + c + 'root') : null;
+    }
+    return root ? root.querySelectorAll('input[type="radio"]') : null;
+  }
+  function setRadio(el, val, ccBug) {
+    var g = groupOf(el, ccBug);
+    if (!g) { el.classList.add('visited'); return; }
+    Array.prototype.forEach.call(g, function (r) { if (val !== null && r.value === val) r.checked = true; mark(r); });
+  }
+  // A2Perf's visitGroup(id, value) (ActionKind::Visit in dom.rs) on element n, the owner of the
+  // acted element's id (Website::id_owner).
+  function visit(n, val, ccBug) {
     var el = nodes[n];
-    if (el && visible(el)) {
+    if (!el || !el.id || !visible(el)) return;
+    el.classList.add('visited');
+    var t = el.tagName, ty = el.type;
+    if (t === 'SELECT' || (t === 'INPUT' && (ty === 'text' || ty === 'number' || ty === 'password' || ty === 'email'))) {
+      el.value = val === null ? '' : val;
+    } else if (t === 'INPUT' && ty === 'radio') setRadio(el, val, ccBug);
+    else if (val === 'true' || val === '1' || !(t === 'INPUT' && ty === 'checkbox')) el.click();
+  }
+  // kind 0 = click, 1 = type val, 2 = A2Perf's visit with val (or null).
+  a2p.step = function (kind, n, val, ccBug) {
+    var el = nodes[n];
+    if (kind === 2) visit(n, val, ccBug);
+    else if (el && visible(el)) {
       var ctl = el.tagName === 'INPUT' || el.tagName === 'SELECT';
+      var radio = el.tagName === 'INPUT' && el.type === 'radio';
       if (kind === 0) {
         if (ctl) el.focus({ preventScroll: true });
-        el.click();
+        if (!radio || groupOf(el, ccBug)) el.click();
         mark(el);
       } else if (ctl) {
         if (el.type === 'checkbox') el.checked = (val === 'true');
-        else if (el.type === 'radio') {
-          document.getElementsByName(el.name).forEach(function (r) { if (r.value === val) r.checked = true; mark(r); });
-        } else el.value = val;
+        else if (radio) setRadio(el, val, ccBug);
+        else el.value = val;
         el.focus({ preventScroll: true });
         mark(el);
       }

@@ -17,7 +17,7 @@ pub const PAD_ID: u32 = 0;
 /// Id of the out-of-vocabulary token.
 pub const OOV_ID: u32 = 1;
 /// Size of [`Vocabulary::standard`] (checked by a test).
-pub const VOCAB_SIZE: usize = 312;
+pub const VOCAB_SIZE: usize = 313;
 
 /// Splits text like A2Perf's `vocabulary_utils.tokenize`: `.` becomes a space, lower-case, then
 /// runs of word characters (letters, digits, `_`) or single other non-space characters.
@@ -107,6 +107,8 @@ const SOURCE_TEXTS: &[&str] = &[
     "mt-0 card-deck card-img-top card-title card-text footer footer-link page container",
     "btn-sm btn-block btn-primary btn-lg visited no_class true false",
     "cabinroot credit_card_typeroot flighttyperoot",
+    // A2Perf's `_dummy` profile field (observation field 0).
+    "_dummy",
 ];
 
 /// A fixed token → id map.

@@ -9,7 +9,19 @@ static A: CountingAllocator = CountingAllocator;
 
 #[test]
 fn simulated_step_does_not_allocate() {
-    let mut env = WebNavEnv::new(WebNavConfig::new(3)).unwrap();
+    assert_steps_do_not_allocate(WebNavEnv::new(WebNavConfig::new(3)).unwrap());
+}
+
+#[test]
+fn simulated_step_with_a2perf_semantics_does_not_allocate() {
+    // Every switch of the original but the pool (its design files are not shipped).
+    let mut cfg = WebNavConfig::a2perf(3, "unused".into());
+    cfg.designs_file = None;
+    let pool = WebNavConfig::new(3).pool().unwrap();
+    assert_steps_do_not_allocate(WebNavEnv::with_pool(pool, cfg, "alloc").unwrap());
+}
+
+fn assert_steps_do_not_allocate(mut env: WebNavEnv) {
     let mut obs = Observation::default();
     let mut step = Step::default();
     let mut rng = RngStream::new(0, "alloc");

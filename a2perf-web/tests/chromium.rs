@@ -8,9 +8,10 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use a2perf_core::{Action, Env, Observation, RngStream, Step};
+use a2perf_web::site::Behaviour;
 use a2perf_web::{
-    BackendKind, ChromiumBackend, ChromiumOptions, Design, Limits, TreeMemory, Vocabulary,
-    WebNavConfig, WebNavEnv, Website, chromium_available, generate,
+    ActionSemantics, BackendKind, ChromiumBackend, ChromiumOptions, Design, Limits, Primitive,
+    TreeMemory, Vocabulary, WebNavConfig, WebNavEnv, Website, chromium_available, generate,
 };
 
 /// Geometry tolerance of the parity test, in normalised units (≈ 0.4 px on a 375 px page).
@@ -65,6 +66,25 @@ fn compare(sim: &Observation, real: &Observation, ctx: &str) -> f32 {
         }
     }
     worst
+}
+
+/// Steps both environments with `a` and checks that rewards, flags, info and observations
+/// agree; returns the largest geometry difference.
+fn step_both(
+    sim: &mut WebNavEnv,
+    real: &mut WebNavEnv,
+    a: usize,
+    ss: &mut Step,
+    rs: &mut Step,
+    ctx: &str,
+) -> f32 {
+    sim.step_into(&Action::Discrete(a), ss).unwrap();
+    real.step_into(&Action::Discrete(a), rs).unwrap();
+    assert_eq!(ss.reward, rs.reward, "{ctx}: reward");
+    assert_eq!(ss.terminated, rs.terminated, "{ctx}: terminated");
+    assert_eq!(ss.truncated, rs.truncated, "{ctx}: truncated");
+    assert_eq!(ss.info, rs.info, "{ctx}: info");
+    compare(&ss.observation, &rs.observation, ctx)
 }
 
 fn pick_action(obs: &Observation, rng: &mut RngStream) -> usize {
@@ -139,15 +159,9 @@ fn simulated_and_chromium_backends_agree() {
             } else {
                 pick_action(&so, &mut rng)
             };
-            sim.step_into(&Action::Discrete(a), &mut ss).unwrap();
-            real.step_into(&Action::Discrete(a), &mut rs).unwrap();
             steps += 1;
             let ctx = format!("episode {ep} step {t} action {a}");
-            assert_eq!(ss.reward, rs.reward, "{ctx}: reward");
-            assert_eq!(ss.terminated, rs.terminated, "{ctx}: terminated");
-            assert_eq!(ss.truncated, rs.truncated, "{ctx}: truncated");
-            assert_eq!(ss.info, rs.info, "{ctx}: info");
-            worst = worst.max(compare(&ss.observation, &rs.observation, &ctx));
+            worst = worst.max(step_both(&mut sim, &mut real, a, &mut ss, &mut rs, &ctx));
             so.copy_from(&ss.observation);
             if ss.done() {
                 successes += usize::from(ss.info.get("success") == Some(1.0));
@@ -176,6 +190,201 @@ fn simulated_and_chromium_backends_agree() {
             && grew("usedSize") < 4e6,
         "page counters after 10 episodes {start}, after {episodes} {end}"
     );
+    real.close().unwrap();
+}
+
+/// The original's semantics (A2Perf's `visitGroup`, the `cc` bug, empty placeholders, the
+/// step limit as termination) agree step by step in both backends: values set and cleared,
+/// checkboxes toggled, radios checked (or, for `cc`, never), ids shared by buttons, stale steps;
+/// and so does the `cc` bug alone under the default click/type semantics.
+#[test]
+fn a2perf_semantics_agree_in_both_backends() {
+    if !chrome_or_skip() {
+        return;
+    }
+    let mut profile = WebNavConfig::a2perf(1, "unused".into());
+    profile.designs_file = None;
+    semantics_parity(profile.clone(), "a2perf");
+    let mut cc = WebNavConfig::new(1);
+    cc.cc_bug = true;
+    semantics_parity(cc.clone(), "cc_bug");
+    // Every (control, field, kind) on one form, for profiles with every value of
+    // `numberofpeople` ("1" is loosely true: typed into a checkbox, it clicks it).
+    profile.step_limit = 1000;
+    cc.step_limit = 1000;
+    for cfg in [profile, cc] {
+        exhaustive_control_parity(cfg);
+    }
+}
+
+fn exhaustive_control_parity(mut cfg: WebNavConfig) {
+    // Two pages; the second repeats four of the first's fields (rendered with
+    // `duplicate_fields`: inputs sharing the first copy's id, a second cc and cabin group).
+    let pages: [&[&str]; 2] = [
+        &[
+            "numberofpeople",
+            "rememberme",
+            "stayloggedin",
+            "cc",
+            "cabin",
+            "state",
+            "username",
+            "city",
+            "next_login",
+        ],
+        &["username", "cabin", "cc", "rememberme", "state", "submit"],
+    ];
+    let design = Design {
+        pages: pages
+            .iter()
+            .map(|p| p.iter().map(|n| Primitive::from_name(n).unwrap()).collect())
+            .collect(),
+    };
+    let mut sim = WebNavEnv::with_pool(vec![design.clone()], cfg.clone(), "sim").unwrap();
+    cfg.backend = BackendKind::Chromium;
+    let mut real = WebNavEnv::with_pool(vec![design], cfg, "chromium").unwrap();
+    let (mut so, mut ro) = (Observation::default(), Observation::default());
+    let (mut ss, mut rs) = (Step::default(), Step::default());
+    let mut people = Vec::new();
+    let mut steps = 0;
+    for seed in 0..40 {
+        sim.reset_to_website(0, seed, &mut so).unwrap();
+        let value = |env: &WebNavEnv| {
+            let f = env
+                .website()
+                .fields
+                .iter()
+                .find(|f| f.key == "numberofpeople");
+            f.map(|f| f.value.clone()).unwrap_or_default()
+        };
+        if people.contains(&value(&sim)) {
+            continue;
+        }
+        people.push(value(&sim));
+        real.reset_to_website(0, seed, &mut ro).unwrap();
+        compare(&so, &ro, &format!("seed {seed} reset"));
+        let fields = sim.website().fields.len();
+        for page in 0..2 {
+            let controls: Vec<usize> = (0..sim.dom().order.len())
+                .filter(|&e| {
+                    sim.website().nodes[sim.dom().order[e] as usize]
+                        .tag
+                        .is_control()
+                })
+                .collect();
+            for &e in &controls {
+                for f in 0..=fields {
+                    for kind in 0..2 {
+                        let a = sim.action_index(e, f, kind);
+                        if !so.is_legal(a) && sim.config().actions == ActionSemantics::Masked {
+                            continue;
+                        }
+                        let ctx =
+                            format!("seed {seed} page {page}: element {e} field {f} kind {kind}");
+                        step_both(&mut sim, &mut real, a, &mut ss, &mut rs, &ctx);
+                        so.copy_from(&ss.observation);
+                        steps += 1;
+                    }
+                }
+            }
+            if page == 0 {
+                let next = (0..sim.dom().order.len())
+                    .find(|&e| {
+                        let n = sim.dom().order[e] as usize;
+                        matches!(sim.website().nodes[n].behaviour, Behaviour::Next(_))
+                    })
+                    .unwrap();
+                let a = sim.action_index(next, 0, 0);
+                step_both(&mut sim, &mut real, a, &mut ss, &mut rs, "next page");
+                so.copy_from(&ss.observation);
+                assert_eq!(sim.dom().page, 1);
+            }
+        }
+    }
+    people.sort();
+    assert_eq!(people, ["1", "2", "3", "4", "5"]);
+    println!("exhaustive control parity: {steps} steps");
+    real.close().unwrap();
+}
+
+fn semantics_parity(mut cfg: WebNavConfig, label: &str) {
+    let l = Limits::default();
+    let has = |d: &Design, name: &str| d.pages.iter().flatten().any(|p| p.name() == name);
+    // Generated designs, those holding a radio group (cc among them) first.
+    let mut pool: Vec<Design> = (1..=3)
+        .flat_map(|level| generate(level, 11, 40, &l).into_iter().map(|g| g.design))
+        .collect();
+    pool.sort_by_key(|d| !(has(d, "cc") || has(d, "cabin") || has(d, "flighttype")));
+    pool.truncate(30);
+    assert!(pool.iter().filter(|d| has(d, "cc")).count() >= 3);
+    let mut sim = WebNavEnv::with_pool(pool.clone(), cfg.clone(), "parity-sim").unwrap();
+    cfg.backend = BackendKind::Chromium;
+    let mut real = WebNavEnv::with_pool(pool.clone(), cfg, "parity-chromium").unwrap();
+    let (mut so, mut ro) = (Observation::default(), Observation::default());
+    let (mut ss, mut rs) = (Step::default(), Step::default());
+    let (mut steps, mut worst, mut successes, mut stale) = (0, 0.0f32, 0, 0);
+    let a2perf = sim.config().actions == ActionSemantics::A2Perf;
+    let episodes = 90;
+    for ep in 0..episodes {
+        let index = ep % pool.len();
+        sim.reset_to_website(index, ep as u64, &mut so).unwrap();
+        real.reset_to_website(index, ep as u64, &mut ro).unwrap();
+        worst = worst.max(compare(&so, &ro, &format!("{label} episode {ep} reset")));
+        let mut rng = RngStream::new(ep as u64, "semantics-parity-actions");
+        for t in 0..30 {
+            let shown = sim.dom().order.len().min(250);
+            let fields = sim.website().fields.len();
+            // A visible control, to set, clear, toggle and check values.
+            let control = sim.dom().order[..shown]
+                .iter()
+                .position(|&n| sim.website().nodes[n as usize].tag.is_control())
+                .map(|first| {
+                    let controls: Vec<usize> = (first..shown)
+                        .filter(|&e| {
+                            let n = sim.dom().order[e] as usize;
+                            sim.website().nodes[n].tag.is_control()
+                        })
+                        .collect();
+                    controls[rng.index(controls.len())]
+                });
+            let a = match (rng.index(20), control) {
+                // The oracle alone in a third of the episodes.
+                _ if ep % 3 == 0 => match sim.oracle_action() {
+                    Some(a) => a,
+                    None => break,
+                },
+                // A2Perf: an element beyond the page (the stale reward), or anywhere.
+                (0, _) if a2perf => {
+                    stale += 1;
+                    sim.action_index(shown + rng.index(250 - shown), 0, rng.index(2))
+                }
+                (1, _) if a2perf => rng.index(12_500),
+                // A control with any field (`_dummy` = no value) or, masked, a legal action.
+                (2..=11, Some(e)) => {
+                    let a = sim.action_index(e, rng.index(fields + 1), rng.index(2));
+                    if so.is_legal(a) {
+                        a
+                    } else {
+                        pick_action(&so, &mut rng)
+                    }
+                }
+                _ => pick_action(&so, &mut rng),
+            };
+            steps += 1;
+            let ctx = format!("{label} episode {ep} step {t} action {a}");
+            worst = worst.max(step_both(&mut sim, &mut real, a, &mut ss, &mut rs, &ctx));
+            so.copy_from(&ss.observation);
+            if ss.done() {
+                successes += usize::from(ss.info.get("success") == Some(1.0));
+                break;
+            }
+        }
+    }
+    println!(
+        "{label} parity: {episodes} episodes, {steps} steps ({stale} stale), {successes} \
+         successes, max geometry difference {worst}"
+    );
+    assert!(successes >= 10 && (stale > 0 || !a2perf));
     real.close().unwrap();
 }
 

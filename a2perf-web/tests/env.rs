@@ -1,30 +1,18 @@
 //! Environment semantics on the simulated backend: contract, rewards, termination, masks,
 //! determinism.
 
+mod common;
+
 use std::collections::BTreeMap;
 
 use a2perf_core::{Action, Env, EnvError, Observation, Registry, RngStream, Space, Step, Value};
 use a2perf_web::site::{Behaviour, Tag};
-use a2perf_web::{Design, Primitive, VOCAB_SIZE, WebNavConfig, WebNavEnv};
+use a2perf_web::{VOCAB_SIZE, WebNavConfig, WebNavEnv};
+use common::slot;
 use proptest::prelude::*;
 
 fn env_with(pages: &[&[&str]]) -> WebNavEnv {
-    let design = Design {
-        pages: pages
-            .iter()
-            .map(|p| p.iter().map(|n| Primitive::from_name(n).unwrap()).collect())
-            .collect(),
-    };
-    WebNavEnv::with_pool(vec![design], WebNavConfig::new(1), "t").unwrap()
-}
-
-/// Observation slot of the first visible element matching `pred`.
-fn slot(env: &WebNavEnv, pred: impl Fn(&a2perf_web::site::Node) -> bool) -> usize {
-    env.dom()
-        .order
-        .iter()
-        .position(|&n| pred(&env.website().nodes[n as usize]))
-        .expect("element present")
+    common::env_on(pages, WebNavConfig::new(1))
 }
 
 #[test]
@@ -56,10 +44,11 @@ fn registered_ids_have_the_documented_contract() {
                 ("dom_tokens", vec![250, 5, 10]),
                 ("dom_features", vec![250, 8]),
                 ("dom_mask", vec![250]),
+                ("time_step", vec![1]),
             ]
         );
         if let Space::Dict(items) = &spec.observation_space {
-            assert_eq!(items.len(), 6);
+            assert_eq!(items.len(), 7);
         } else {
             panic!("observation space must be a dict");
         }
@@ -77,6 +66,35 @@ fn registered_ids_have_the_documented_contract() {
         reg.make_env("WebNavigation-Difficulty-01-v0", &bad)
             .is_err()
     );
+    let mut bad = BTreeMap::new();
+    bad.insert("pool".to_string(), Value::Str("a2perff".into()));
+    let err = reg
+        .make_env("WebNavigation-Difficulty-01-v0", &bad)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("did you mean `a2perf`"), "{err}");
+    // The original's pool needs its design file, given by path.
+    let mut bad = BTreeMap::new();
+    bad.insert("pool".to_string(), Value::Str("a2perf".into()));
+    let err = reg
+        .make_env("WebNavigation-Difficulty-01-v0", &bad)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("designs") && err.contains("01.json"), "{err}");
+    // Every switch is a documented parameter whose default is the corrected behaviour.
+    let entry = reg.env("WebNavigation-Difficulty-01-v0").unwrap();
+    let default = |name: &str| {
+        let spec = entry.params.iter().find(|p| p.name == name).unwrap();
+        assert!(!spec.doc.is_empty());
+        spec.default.clone()
+    };
+    assert_eq!(default("pool"), Value::Str("generated".into()));
+    assert_eq!(default("actions"), Value::Str("masked".into()));
+    assert_eq!(default("cc_bug"), Value::Bool(false));
+    assert_eq!(default("placeholders"), Value::Bool(true));
+    assert_eq!(default("limit_terminates"), Value::Bool(false));
     assert_eq!(reg.generalization("web_navigation").len(), 5);
 }
 
@@ -102,7 +120,7 @@ fn rewards_follow_the_reference_formula() {
     assert!((s.reward + 0.55).abs() < 1e-12);
     // Typing a wrong field value into a filled input loses the potential: −1/3 − 0.05.
     let (e, f, _) = env.decode_action(a);
-    let wrong = (0..fields).find(|&g| g != f).unwrap();
+    let wrong = (1..=fields).find(|&g| g != f).unwrap();
     let s = env
         .step(&Action::Discrete(env.action_index(e, wrong, 1)))
         .unwrap();
@@ -191,10 +209,11 @@ fn masks_allow_clicks_with_field_zero_and_typing_into_controls_only() {
             .order
             .get(e)
             .map(|&i| &env.website().nodes[i as usize]);
+        // Field 0 is `_dummy`: clicks use it, typing uses the website's fields 1..=fields.
         let expect = match (node, kind) {
             (None, _) => false,
             (Some(_), 0) => f == 0,
-            (Some(nd), _) => nd.tag.is_control() && f < fields,
+            (Some(nd), _) => nd.tag.is_control() && (1..=fields).contains(&f),
         };
         assert_eq!(legal, expect, "action {a}");
         assert_eq!(env.is_legal(a), expect);
@@ -203,7 +222,7 @@ fn masks_allow_clicks_with_field_zero_and_typing_into_controls_only() {
     let dm = &obs.tensor("dom_mask").unwrap().data;
     assert_eq!(dm.iter().filter(|&&x| x == 1.0).count(), n);
     let pm = &obs.tensor("profile_mask").unwrap().data;
-    assert_eq!(pm.iter().filter(|&&x| x == 1.0).count(), fields);
+    assert_eq!(pm.iter().filter(|&&x| x == 1.0).count(), fields + 1);
     let masked = (0..mask.len()).find(|&a| !mask[a]).unwrap();
     assert!(matches!(
         env.step(&Action::Discrete(masked)),
@@ -296,7 +315,9 @@ proptest! {
             prop_assert!(step.reward >= -2.6 && step.reward <= 2.0);
             let phi = step.info.get("potential").unwrap();
             prop_assert!((0.0..=1.0).contains(&phi));
-            for t in &step.observation.tensors {
+            let ts = step.observation.tensor("time_step").unwrap().data[0];
+            prop_assert_eq!(ts, env.steps() as f32 / 25.0);
+            for t in step.observation.tensors.iter().filter(|t| t.name != "time_step") {
                 let hi = if t.name.contains("tokens") || t.name.starts_with("profile_k") || t.name.starts_with("profile_v") {
                     (VOCAB_SIZE - 1) as f32
                 } else {

@@ -1,31 +1,16 @@
 //! Generator, difficulty, solvability (oracle on ≥ 1,000 websites per level), vocabulary
 //! coverage and the original design files.
 
-use a2perf_core::{Action, Env, Observation, RngStream, Step};
+mod common;
+
+use a2perf_core::RngStream;
 use a2perf_web::{
     Design, Limits, OOV_ID, Vocabulary, WebNavConfig, WebNavEnv, Website, generate, load_designs,
     report,
 };
+use common::{oracle_episode, shared};
 
 const PER_LEVEL: usize = 1000;
-
-fn oracle_episode(env: &mut WebNavEnv, index: usize, seed: u64) -> (bool, usize, f64) {
-    let mut obs = Observation::default();
-    env.reset_to_website(index, seed, &mut obs).unwrap();
-    let mut step = Step::default();
-    let (mut steps, mut ret) = (0, 0.0);
-    while let Some(a) = env.oracle_action() {
-        assert!(obs.is_legal(a), "oracle chose a masked action");
-        env.step_into(&Action::Discrete(a), &mut step).unwrap();
-        obs.copy_from(&step.observation);
-        steps += 1;
-        ret += step.reward;
-        if step.done() {
-            return (step.info.get("success") == Some(1.0), steps, ret);
-        }
-    }
-    (false, steps, ret)
-}
 
 #[test]
 fn oracle_solves_every_generated_website_within_the_step_limit() {
@@ -117,22 +102,6 @@ fn every_emitted_string_is_in_the_fixed_vocabulary() {
             assert!(site.string_tokens.iter().all(|s| !s.contains(&OOV_ID)));
         }
     }
-}
-
-fn shared(name: &str) -> Option<std::path::PathBuf> {
-    let p = std::path::PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/data/web/a2perf_designs/"
-    ))
-    .join(name);
-    if p.exists() {
-        return Some(p);
-    }
-    if std::env::var("A2PERF_REQUIRE_SHARED").as_deref() == Ok("1") {
-        panic!("{} is missing and A2PERF_REQUIRE_SHARED=1", p.display());
-    }
-    println!("SKIP: {} not found", p.display());
-    None
 }
 
 #[test]
