@@ -130,7 +130,9 @@ impl ResumePoint {
         }
         let version = r.u32()?;
         if version != RESUME_FORMAT_VERSION {
-            return Err(bad(format!("resume payload version {version} is not supported")));
+            return Err(bad(format!(
+                "resume payload version {version} is not supported"
+            )));
         }
         let env_steps = r.u64()?;
         let next_eval = r.u64()?;
@@ -417,7 +419,9 @@ mod tests {
             format_version: 1,
             payload: vec![0; 8],
         };
-        let err = ResumePoint::from_bytes(&c.to_bytes()).unwrap_err().to_string();
+        let err = ResumePoint::from_bytes(&c.to_bytes())
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("not a resume point"), "{err}");
     }
 
@@ -429,7 +433,11 @@ mod tests {
         dir.save(&point(10, vec![1])).unwrap();
         dir.save(&point(20, vec![2])).unwrap();
         // A temporary file left by a write that was killed.
-        std::fs::write(tmp.path().join("resume/.step_000000000030.resume.tmp-9"), b"x").unwrap();
+        std::fs::write(
+            tmp.path().join("resume/.step_000000000030.resume.tmp-9"),
+            b"x",
+        )
+        .unwrap();
         let mut bytes = std::fs::read(dir.path_for(20)).unwrap();
         let last = bytes.len() - 1;
         bytes[last] ^= 1;
@@ -437,8 +445,16 @@ mod tests {
         let found = dir.newest_valid().unwrap();
         let (path, p) = found.point.unwrap();
         assert_eq!((path, p.state), (dir.path_for(10), vec![1]));
-        assert!(found.warnings[0].contains("checksum"), "{:?}", found.warnings);
-        assert!(found.warnings[1].contains("fell back"), "{:?}", found.warnings);
+        assert!(
+            found.warnings[0].contains("checksum"),
+            "{:?}",
+            found.warnings
+        );
+        assert!(
+            found.warnings[1].contains("fell back"),
+            "{:?}",
+            found.warnings
+        );
         assert!(
             tmp.path()
                 .join("resume/step_000000000020.resume.corrupt")

@@ -216,7 +216,10 @@ fn restored_environments_continue_exactly() {
     assert!(before.iter().any(|s| s.2 || s.3), "episodes ended before");
     let snap = a.snapshot();
     assert!(snap.envs.iter().all(|e| e.episodes >= 1));
-    assert!(snap.envs.iter().any(|e| !e.actions.is_empty()), "mid-episode");
+    assert!(
+        snap.envs.iter().any(|e| !e.actions.is_empty()),
+        "mid-episode"
+    );
     let json = serde_json::to_string(&snap).unwrap();
     let mut saved_policies = policies.clone();
     let mut saved_obs = obs.clone();
