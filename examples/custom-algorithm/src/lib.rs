@@ -474,14 +474,16 @@ mod tests {
         }
     }
 
-    /// Trains on the corridor into `sink`, from `resume` if given: the curve, the final policy's
-    /// checkpoint, and the step it resumed from.
+    /// The curve, the final policy's checkpoint and the step training resumed from.
+    type Trained = (Vec<(u64, f64)>, Checkpoint, Option<u64>);
+
+    /// Trains on the corridor into `sink`, from `resume` if given.
     fn train_with(
         seed: u64,
         sink: &mut dyn CheckpointSink,
         cancel: CancelToken,
         resume: Option<ResumePoint>,
-    ) -> Result<(Vec<(u64, f64)>, Checkpoint, Option<u64>), RunError> {
+    ) -> Result<Trained, RunError> {
         let mut reg = Registry::new();
         register(&mut reg);
         let entry = reg.env(CORRIDOR_ID).unwrap().clone();
