@@ -360,3 +360,40 @@ impl VecEnv {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::alloc_count::{CountingAllocator, count_allocations};
+
+    #[global_allocator]
+    static ALLOC: CountingAllocator = CountingAllocator;
+
+    /// Recording the episode's actions (for snapshots) allocates only while an episode is longer
+    /// than every one before it: stepping stays allocation-free in the steady state.
+    #[test]
+    fn recording_actions_allocates_nothing_once_warm() {
+        let mut log = ActionLog::default();
+        let continuous = Action::Continuous(vec![0.25; 12]);
+        let episode = |log: &mut ActionLog| {
+            log.clear();
+            for k in 0..600 {
+                log.push(&continuous);
+                log.push(&Action::Discrete(k));
+            }
+        };
+        episode(&mut log);
+        let (n, ()) = count_allocations(|| {
+            for _ in 0..3 {
+                episode(&mut log);
+            }
+        });
+        assert_eq!(n, 0);
+        let actions = log.to_actions();
+        assert_eq!(actions.len(), 1200);
+        assert_eq!(
+            (&actions[0], &actions[1199]),
+            (&continuous, &Action::Discrete(599))
+        );
+    }
+}

@@ -521,12 +521,16 @@ fn prepare(run: &RunDir, record_json: &[u8], warnings: &mut Vec<String>) -> Resu
         match run.status()? {
             Some(s) if s.state.is_complete() => return Ok(Start::Skip),
             Some(_) => {
-                let same = std::fs::read(run.file(RUN_FILE)).is_ok_and(|b| b == record_json);
-                if !same {
-                    warnings.push(
-                        "its configuration changed since it was interrupted: trained from scratch"
-                            .into(),
-                    );
+                let recorded = std::fs::read(run.file(RUN_FILE)).ok();
+                if recorded.as_deref() != Some(record_json) {
+                    // No run.json: killed before writing it, so nothing of it can be resumed.
+                    if recorded.is_some() {
+                        warnings.push(
+                            "its configuration changed since it was interrupted: trained from \
+                             scratch"
+                                .into(),
+                        );
+                    }
                     wipe(run)?;
                 } else {
                     let resume_dir = ResumeDir::new(run.file(RESUME_DIR));

@@ -450,6 +450,44 @@ fn a_changed_configuration_trains_from_scratch() {
     assert_same_results(&run, &clean.run_dir(1));
 }
 
+/// A resume point whose algorithm state cannot be read (written by another version of the
+/// algorithm, say) is not retried forever: the run is trained from scratch, with a warning.
+#[test]
+fn an_unreadable_algorithm_state_trains_from_scratch() {
+    let wire = Tripwire::default();
+    let reg = registry(&wire);
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = tripwire_plan(tmp.path(), vec![3]);
+    train_interrupted(&reg, &plan, &wire, 0, 700);
+    let run = plan.run_dir(3);
+    let newest = *resume_steps(&run).last().unwrap();
+    let path = run.join(format!("resume/step_{newest:012}.resume"));
+    let mut point = a2perf_core::ResumePoint::from_bytes(&std::fs::read(&path).unwrap()).unwrap();
+    point.state = b"{\"from\": \"another version\"}".to_vec();
+    std::fs::write(&path, point.to_bytes()).unwrap();
+
+    let s = rerun(&reg, &plan);
+    assert_eq!(outcomes(&s), vec![RunOutcome::Completed]);
+    assert!(s.resumed.is_empty());
+    assert!(
+        s.warnings[0]
+            .1
+            .contains(&format!("cannot resume from step {newest}")),
+        "{:?}",
+        s.warnings
+    );
+    let segs: TrainSegments = read(&run.join("train_segments.json"));
+    assert_eq!(
+        segs.segments.len(),
+        1,
+        "the failed attempt's directory was emptied"
+    );
+    let clean_dir = tempfile::tempdir().unwrap();
+    let clean = tripwire_plan(clean_dir.path(), vec![3]);
+    train_clean(&reg, &clean);
+    assert_same_results(&run, &clean.run_dir(3));
+}
+
 /// A segment killed without a chance to record anything (as by `kill -9`) is counted, and the
 /// combined system figures say that its time and energy are missing.
 #[test]
