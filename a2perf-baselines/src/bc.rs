@@ -21,6 +21,39 @@ use crate::nn::dist::{gaussian, masked};
 use crate::nn::optim::{Adam, LrSchedule};
 use crate::nn::{MlpWs, clip_grad_norm, ensure};
 use crate::policy::{Head, NetPolicy, ObsNorm};
+use crate::resume::{StateReader, StateWriter, resume_err};
+
+/// Version of BC's resumable training state.
+const STATE_VERSION: u32 = 1;
+
+/// FNV-1a over the demonstrations as loaded (observations and actions), so that a run is not
+/// resumed on a dataset that changed.
+fn fingerprint(store: &ObsBatch, act_d: &[usize], act_c: &[f32]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |x: u64| {
+        for b in x.to_le_bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0000_0100_0000_01B3);
+        }
+    };
+    for t in 0..store.num_tensors() {
+        for v in store.tensor(t) {
+            eat(u64::from(v.to_bits()));
+        }
+    }
+    for row in 0..store.len() {
+        for legal in store.mask(row).unwrap_or(&[]) {
+            eat(u64::from(*legal));
+        }
+    }
+    for a in act_d {
+        eat(*a as u64);
+    }
+    for a in act_c {
+        eat(u64::from(a.to_bits()));
+    }
+    h
+}
 
 /// BC hyperparameters.
 #[derive(Clone, Debug, PartialEq)]
@@ -142,8 +175,12 @@ impl Algorithm for Bc {
         "bc"
     }
 
+    /// Resumable: the state saved at every checkpoint interval holds the policy (parameters,
+    /// the dataset's normalisation statistics), Adam, the minibatch stream, the samples drawn
+    /// and a fingerprint of the dataset (a changed dataset is refused).
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
         let cfg = self.config.clone();
+        let resume = ctx.take_resume_state();
         let loader = self.loader.clone().ok_or_else(|| {
             invalid(
                 "dataset",
@@ -197,6 +234,7 @@ impl Algorithm for Bc {
                 }
             }
         }
+        let data_fingerprint = fingerprint(&store, &act_d, &act_c);
         let mut init_rng = ctx.rng("bc/init");
         let params = match &head {
             Head::Discrete(net) => net.init_params(&mut init_rng),
@@ -225,6 +263,19 @@ impl Algorithm for Bc {
         let mut dlog_std = vec![0.0f32; act_dim];
         let total = ctx.settings().total_env_steps.max(1);
         let mut samples = 0u64;
+        if let Some(bytes) = &resume {
+            let mut r = StateReader::new(bytes, "bc", STATE_VERSION)?;
+            if r.u64()? != data_fingerprint {
+                return Err(resume_err(
+                    "the dataset differs from the one training started on",
+                ));
+            }
+            policy.load_training_state(&mut r)?;
+            adam.load("policy", &mut r)?;
+            rng = r.rng()?;
+            samples = r.u64()?;
+            r.finish()?;
+        }
         loop {
             let b = cfg.batch_size;
             idx.clear();
@@ -292,7 +343,16 @@ impl Algorithm for Bc {
             if adam.steps().is_multiple_of(100) {
                 check_finite("BC parameters", &policy.params)?;
             }
-            if ctx.progress(samples, &mut policy)? == Control::Stop {
+            let save = |p: &NetPolicy| {
+                let mut w = StateWriter::new("bc", STATE_VERSION);
+                w.u64(data_fingerprint);
+                p.save_training_state(&mut w);
+                adam.save(&mut w);
+                w.rng(&rng);
+                w.u64(samples);
+                Ok(w.finish())
+            };
+            if ctx.progress_resumable(samples, &mut policy, save)? == Control::Stop {
                 break;
             }
         }

@@ -15,6 +15,10 @@ use crate::nn::optim::{Adam, LrSchedule};
 use crate::nn::{clip_grad_norm, ensure, polyak};
 use crate::policy::{Head, NetPolicy};
 use crate::replay::{ReplayBuffer, ReplaySample};
+use crate::resume::{StateReader, StateWriter};
+
+/// Version of DDQN's resumable training state.
+const STATE_VERSION: u32 = 1;
 
 /// DDQN hyperparameters (see [`Ddqn::params`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -169,8 +173,12 @@ impl Algorithm for Ddqn {
         "ddqn"
     }
 
+    /// Resumable: the state saved at every checkpoint interval holds the online and target
+    /// parameters, Adam, both random streams, the update counters, the whole replay buffer and
+    /// every environment's current episode.
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
         let cfg = self.config.clone();
+        let resume = ctx.take_resume_state();
         let (mut venv, spec) = make_vec_env(ctx)?;
         let n_env = venv.len();
         if !matches!(spec.action_space, Space::Discrete { .. }) {
@@ -205,8 +213,28 @@ impl Algorithm for Ddqn {
         let mut updates = 0usize;
 
         cur.resize(n_env);
-        for (i, out) in venv.reset_all()?.iter().enumerate() {
-            cur.write_row(i, &out.step.observation)?;
+        match &resume {
+            Some(bytes) => {
+                let mut r = StateReader::new(bytes, "ddqn", STATE_VERSION)?;
+                policy.load_training_state(&mut r)?;
+                r.f32s_into("target parameters", &mut target_params)?;
+                adam.load("policy", &mut r)?;
+                rng = r.rng()?;
+                sample_rng = r.rng()?;
+                update_credit = r.f32()?;
+                updates = r.usize()?;
+                env_steps = r.u64()?;
+                replay.load(&mut r)?;
+                for (i, out) in r.envs(&mut venv, &mut |m| ctx.warn(m))?.iter().enumerate() {
+                    cur.write_row(i, &out.step.observation)?;
+                }
+                r.finish()?;
+            }
+            None => {
+                for (i, out) in venv.reset_all()?.iter().enumerate() {
+                    cur.write_row(i, &out.step.observation)?;
+                }
+            }
         }
         loop {
             let progress = env_steps as f64 / total as f64;
@@ -309,7 +337,21 @@ impl Algorithm for Ddqn {
                 }
                 check_finite("DDQN parameters", &policy.params)?;
             }
-            if ctx.progress(env_steps, &mut policy)? == Control::Stop {
+            let save = |p: &NetPolicy| {
+                let mut w = StateWriter::new("ddqn", STATE_VERSION);
+                p.save_training_state(&mut w);
+                w.f32s(&target_params);
+                adam.save(&mut w);
+                w.rng(&rng);
+                w.rng(&sample_rng);
+                w.f32(update_credit);
+                w.usize(updates);
+                w.u64(env_steps);
+                replay.save(&mut w);
+                w.envs(&venv);
+                Ok(w.finish())
+            };
+            if ctx.progress_resumable(env_steps, &mut policy, save)? == Control::Stop {
                 break;
             }
         }

@@ -29,6 +29,7 @@ pub mod nn;
 pub mod policy;
 pub mod ppo;
 pub mod replay;
+mod resume;
 pub mod sac;
 
 use std::sync::Arc;

@@ -447,6 +447,50 @@ impl NetPolicy {
         Ok(p)
     }
 
+    /// Writes what training changes in the policy: parameters, normalisation statistics and the
+    /// exploration stream (for resumable training).
+    pub(crate) fn save_training_state(&self, w: &mut crate::resume::StateWriter) {
+        w.f32s(&self.params);
+        w.bool(self.obs_norm.is_some());
+        if let Some(n) = &self.obs_norm {
+            w.usizes(&n.tensors);
+            for s in &n.stats {
+                s.save(w);
+            }
+        }
+        w.rng(&self.rng);
+    }
+
+    /// Restores what [`save_training_state`](Self::save_training_state) wrote into a policy built
+    /// the same way (same network, same normalised tensors).
+    pub(crate) fn load_training_state(
+        &mut self,
+        r: &mut crate::resume::StateReader<'_>,
+    ) -> Result<(), a2perf_core::RunError> {
+        r.f32s_into("policy parameters", &mut self.params)?;
+        let has_norm = r.bool()?;
+        match (&mut self.obs_norm, has_norm) {
+            (Some(n), true) => {
+                if r.usizes()? != n.tensors {
+                    return Err(crate::resume::resume_err(
+                        "the saved observation normalisation covers other tensors",
+                    ));
+                }
+                for s in &mut n.stats {
+                    s.load(r)?;
+                }
+            }
+            (None, false) => {}
+            _ => {
+                return Err(crate::resume::resume_err(
+                    "observation normalisation was switched on or off since the state was saved",
+                ));
+            }
+        }
+        self.rng = r.rng()?;
+        Ok(())
+    }
+
     /// Reseeds the exploration stream.
     pub fn reseed(&mut self, seed: u64) {
         self.rng = RngStream::new(seed, "policy/explore");

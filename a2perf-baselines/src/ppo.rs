@@ -20,6 +20,10 @@ use crate::nn::norm::RewardScaler;
 use crate::nn::optim::{Adam, LrSchedule};
 use crate::nn::{MlpWs, clip_grad_norm, ensure};
 use crate::policy::{Head, NetPolicy, ObsNorm};
+use crate::resume::{StateReader, StateWriter, resume_err};
+
+/// Version of PPO's resumable training state.
+const STATE_VERSION: u32 = 1;
 
 /// PPO hyperparameters (see [`Ppo::params`] for documentation and defaults).
 #[derive(Clone, Debug, PartialEq)]
@@ -240,8 +244,13 @@ impl Algorithm for Ppo {
         "ppo"
     }
 
+    /// Resumable: the state saved at every checkpoint interval holds the policy (parameters,
+    /// observation statistics), Adam, the reward scaler, both random streams, the minibatch
+    /// order, the step count and every environment's current episode. A resume point is taken
+    /// after an update, when the rollout buffer holds nothing that is still needed.
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
         let cfg = self.config.clone();
+        let resume = ctx.take_resume_state();
         let (mut venv, spec) = make_vec_env(ctx)?;
         let n_env = venv.len();
         let layout = ObsLayout::from_spec(&spec)?;
@@ -306,8 +315,33 @@ impl Algorithm for Ppo {
 
         // Current observations (raw) of every environment.
         raw.resize(n_env);
-        for (i, out) in venv.reset_all()?.iter().enumerate() {
-            raw.write_row(i, &out.step.observation)?;
+        match &resume {
+            Some(bytes) => {
+                let mut r = StateReader::new(bytes, "ppo", STATE_VERSION)?;
+                policy.load_training_state(&mut r)?;
+                adam.load("policy", &mut r)?;
+                scaler.load(&mut r)?;
+                rng = r.rng()?;
+                mb_rng = r.rng()?;
+                let saved_order = r.usizes()?;
+                if saved_order.len() != rows {
+                    return Err(resume_err(format!(
+                        "rollout of {} rows saved, this configuration has {rows}",
+                        saved_order.len()
+                    )));
+                }
+                order = saved_order;
+                env_steps = r.u64()?;
+                for (i, out) in r.envs(&mut venv, &mut |m| ctx.warn(m))?.iter().enumerate() {
+                    raw.write_row(i, &out.step.observation)?;
+                }
+                r.finish()?;
+            }
+            None => {
+                for (i, out) in venv.reset_all()?.iter().enumerate() {
+                    raw.write_row(i, &out.step.observation)?;
+                }
+            }
         }
         loop {
             for t in 0..cfg.num_steps {
@@ -517,7 +551,19 @@ impl Algorithm for Ppo {
                 }
             }
             check_finite("PPO parameters", &policy.params)?;
-            if ctx.progress(env_steps, &mut policy)? == Control::Stop {
+            let save = |p: &NetPolicy| {
+                let mut w = StateWriter::new("ppo", STATE_VERSION);
+                p.save_training_state(&mut w);
+                adam.save(&mut w);
+                scaler.save(&mut w);
+                w.rng(&rng);
+                w.rng(&mb_rng);
+                w.usizes(&order);
+                w.u64(env_steps);
+                w.envs(&venv);
+                Ok(w.finish())
+            };
+            if ctx.progress_resumable(env_steps, &mut policy, save)? == Control::Stop {
                 break;
             }
         }

@@ -426,6 +426,143 @@ impl ReplayBuffer {
         Ok(())
     }
 
+    /// Writes the whole buffer, observation store included, exactly (for resumable training:
+    /// keeping the replay is what makes a resumed off-policy run identical to an uninterrupted
+    /// one). Only the filled part of the ring is written.
+    pub(crate) fn save(&self, w: &mut crate::resume::StateWriter) {
+        w.usize(self.capacity);
+        w.usize(self.act_dim);
+        w.usize(self.pos);
+        w.usize(self.size);
+        let st = &self.store;
+        w.usizes(&st.dims);
+        w.usize(st.words);
+        for c in &st.columns {
+            match c {
+                Column::U8(v) => {
+                    w.u32(0);
+                    w.u8s(v);
+                }
+                Column::U16(v) => {
+                    w.u32(1);
+                    w.u16s(v);
+                }
+                Column::F32(v) => {
+                    w.u32(2);
+                    w.f32s(v);
+                }
+            }
+        }
+        w.u64s(&st.mask);
+        let refs: Vec<u32> = st.refs.clone();
+        w.u32s(&refs);
+        w.usizes(&st.free);
+        let n = self.size;
+        w.usizes(&self.obs_slot[..n]);
+        w.usizes(&self.next_slot[..n]);
+        w.usizes(&self.act_d[..n]);
+        w.f32s(&self.act_c[..n * self.act_dim]);
+        w.f32s(&self.rewards[..n]);
+        w.bools(&self.terminated[..n]);
+        w.usize(self.last_next.len());
+        for s in &self.last_next {
+            w.bool(s.is_some());
+            w.usize(s.unwrap_or(0));
+        }
+    }
+
+    /// Restores what [`save`](Self::save) wrote into a buffer built with the same layout,
+    /// capacity and action dimension.
+    pub(crate) fn load(
+        &mut self,
+        r: &mut crate::resume::StateReader<'_>,
+    ) -> Result<(), a2perf_core::RunError> {
+        use crate::resume::resume_err;
+        let (capacity, act_dim) = (r.usize()?, r.usize()?);
+        if (capacity, act_dim) != (self.capacity, self.act_dim) {
+            return Err(resume_err(format!(
+                "replay buffer: capacity {capacity} and action size {act_dim} saved, this \
+                 configuration has {} and {}",
+                self.capacity, self.act_dim
+            )));
+        }
+        let (pos, size) = (r.usize()?, r.usize()?);
+        if pos >= capacity || size > capacity {
+            return Err(resume_err("replay buffer: position out of range"));
+        }
+        let dims = r.usizes()?;
+        let words = r.usize()?;
+        if dims != self.store.dims || words != self.store.words {
+            return Err(resume_err(
+                "replay buffer: the saved observations have another layout",
+            ));
+        }
+        let mut columns = Vec::with_capacity(dims.len());
+        for _ in &dims {
+            columns.push(match r.u32()? {
+                0 => Column::U8(r.u8s()?),
+                1 => Column::U16(r.u16s()?),
+                2 => Column::F32(r.f32s()?),
+                t => {
+                    return Err(resume_err(format!(
+                        "replay buffer: unknown column type {t}"
+                    )));
+                }
+            });
+        }
+        let mask = r.u64s()?;
+        let refs = r.u32s()?;
+        let free = r.usizes()?;
+        let slots = refs.len();
+        let columns_fit = columns.iter().zip(&dims).all(|(c, d)| c.len() == slots * d);
+        if !columns_fit || mask.len() != slots * words || free.iter().any(|f| *f >= slots) {
+            return Err(resume_err("replay buffer: inconsistent observation store"));
+        }
+        let obs_slot = r.usizes()?;
+        let next_slot = r.usizes()?;
+        let act_d = r.usizes()?;
+        let act_c = r.f32s()?;
+        let rewards = r.f32s()?;
+        let terminated = r.bools()?;
+        let lens_ok = [
+            obs_slot.len(),
+            next_slot.len(),
+            act_d.len(),
+            rewards.len(),
+            terminated.len(),
+        ]
+        .iter()
+        .all(|l| *l == size)
+            && act_c.len() == size * act_dim;
+        if !lens_ok || obs_slot.iter().chain(&next_slot).any(|s| *s >= slots) {
+            return Err(resume_err("replay buffer: inconsistent transitions"));
+        }
+        let streams = r.usize()?;
+        let mut last_next = Vec::with_capacity(streams.min(1 << 16));
+        for _ in 0..streams {
+            let some = r.bool()?;
+            let slot = r.usize()?;
+            if some && slot >= slots {
+                return Err(resume_err("replay buffer: inconsistent stream slot"));
+            }
+            last_next.push(some.then_some(slot));
+        }
+        self.store.columns = columns;
+        self.store.mask = mask;
+        self.store.refs = refs;
+        self.store.free = free;
+        self.obs_slot[..size].copy_from_slice(&obs_slot);
+        self.next_slot[..size].copy_from_slice(&next_slot);
+        self.act_d[..size].copy_from_slice(&act_d);
+        self.act_c[..size * act_dim].copy_from_slice(&act_c);
+        self.rewards[..size].copy_from_slice(&rewards);
+        self.terminated[..size].copy_from_slice(&terminated);
+        self.last_next = last_next;
+        self.pos = pos;
+        self.size = size;
+        Ok(())
+    }
+
     /// Draws `n` transitions uniformly (with replacement) into `out`.
     pub fn sample(
         &self,
@@ -550,6 +687,63 @@ mod tests {
             assert_eq!(sample.next.mask(k), want.mask(1));
             assert_eq!(sample.act_c[k], step as f32);
         }
+    }
+
+    /// A saved and restored buffer samples exactly what the original samples, and keeps
+    /// sharing observations with the next push.
+    #[test]
+    fn save_and_load_are_exact() {
+        let l = layout();
+        let mut rb = ReplayBuffer::new(&l, 9, 1);
+        let mut cur = ObsBatch::new(&l);
+        cur.push(&obs(0)).unwrap();
+        for t in 1..25u32 {
+            let next = if t.is_multiple_of(5) { t + 300 } else { t };
+            rb.push(
+                0,
+                &cur,
+                0,
+                &obs(next),
+                t as usize,
+                &[t as f32],
+                -0.5,
+                t % 7 == 0,
+            )
+            .unwrap();
+            cur.write_row(0, &obs(if t.is_multiple_of(5) { t + 500 } else { t }))
+                .unwrap();
+        }
+        let mut w = crate::resume::StateWriter::new("test", 1);
+        rb.save(&mut w);
+        let bytes = w.finish();
+        let mut back = ReplayBuffer::new(&l, 9, 1);
+        let mut r = crate::resume::StateReader::new(&bytes, "test", 1).unwrap();
+        back.load(&mut r).unwrap();
+        r.finish().unwrap();
+        for b in [&mut rb, &mut back] {
+            b.push(0, &cur, 0, &obs(26), 26, &[26.0], 1.0, false)
+                .unwrap();
+        }
+        assert_eq!(back.stored_observations(), rb.stored_observations());
+        let (mut s1, mut s2) = (ReplaySample::new(&l), ReplaySample::new(&l));
+        let mut idx = Vec::new();
+        rb.sample(40, &mut RngStream::new(1, "s"), &mut idx, &mut s1);
+        back.sample(40, &mut RngStream::new(1, "s"), &mut idx, &mut s2);
+        for k in 0..40 {
+            for t in 0..2 {
+                assert_eq!(s1.obs.tensor_row(t, k), s2.obs.tensor_row(t, k));
+                assert_eq!(s1.next.tensor_row(t, k), s2.next.tensor_row(t, k));
+            }
+            assert_eq!(s1.obs.mask(k), s2.obs.mask(k));
+        }
+        assert_eq!(
+            (s1.act_d, s1.act_c, s1.rewards, s1.terminated),
+            (s2.act_d, s2.act_c, s2.rewards, s2.terminated)
+        );
+        let mut other = ReplayBuffer::new(&l, 10, 1);
+        let mut r = crate::resume::StateReader::new(&bytes, "test", 1).unwrap();
+        let err = other.load(&mut r).unwrap_err().to_string();
+        assert!(err.contains("capacity 9"), "{err}");
     }
 
     #[test]

@@ -15,6 +15,10 @@ use crate::nn::optim::{Adam, LrSchedule};
 use crate::nn::{Activation, Mlp, MlpWs, ParamAlloc, clip_grad_norm, ensure, polyak};
 use crate::policy::{Head, NetPolicy, ObsNorm, squash_to_bounds};
 use crate::replay::{ReplayBuffer, ReplaySample};
+use crate::resume::{StateReader, StateWriter};
+
+/// Version of SAC's resumable training state.
+const STATE_VERSION: u32 = 1;
 
 /// SAC hyperparameters (see [`Sac::params`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -193,8 +197,13 @@ impl Algorithm for Sac {
         "sac"
     }
 
+    /// Resumable: the state saved at every checkpoint interval holds the actor (parameters,
+    /// observation statistics), both critics with their targets and optimisers, the temperature
+    /// and its optimiser, the three random streams, the update credit, the whole replay buffer
+    /// and every environment's current episode.
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
         let cfg = self.config.clone();
+        let resume = ctx.take_resume_state();
         let (mut venv, spec) = make_vec_env(ctx)?;
         let n_env = venv.len();
         let d = match &spec.action_space {
@@ -279,8 +288,34 @@ impl Algorithm for Sac {
         let mut credit = 0.0f32;
 
         cur.resize(n_env);
-        for (i, out) in venv.reset_all()?.iter().enumerate() {
-            cur.write_row(i, &out.step.observation)?;
+        match &resume {
+            Some(bytes) => {
+                let mut r = StateReader::new(bytes, "sac", STATE_VERSION)?;
+                policy.load_training_state(&mut r)?;
+                for (k, c) in critics.iter_mut().enumerate() {
+                    r.f32s_into(&format!("critic {k} parameters"), &mut c.params)?;
+                    r.f32s_into(&format!("critic {k} target"), &mut c.target)?;
+                    c.adam.load(&format!("critic {k}"), &mut r)?;
+                }
+                actor_adam.load("actor", &mut r)?;
+                log_alpha = r.f32()?;
+                alpha_adam.load("temperature", &mut r)?;
+                rng = r.rng()?;
+                noise_rng = r.rng()?;
+                sample_rng = r.rng()?;
+                credit = r.f32()?;
+                env_steps = r.u64()?;
+                replay.load(&mut r)?;
+                for (i, out) in r.envs(&mut venv, &mut |m| ctx.warn(m))?.iter().enumerate() {
+                    cur.write_row(i, &out.step.observation)?;
+                }
+                r.finish()?;
+            }
+            None => {
+                for (i, out) in venv.reset_all()?.iter().enumerate() {
+                    cur.write_row(i, &out.step.observation)?;
+                }
+            }
         }
         loop {
             if let Some(n) = &mut policy.obs_norm {
@@ -497,7 +532,27 @@ impl Algorithm for Sac {
                 check_finite("SAC actor", &policy.params)?;
                 check_finite("SAC critic", &critics[0].params)?;
             }
-            if ctx.progress(env_steps, &mut policy)? == Control::Stop {
+            let save = |p: &NetPolicy| {
+                let mut w = StateWriter::new("sac", STATE_VERSION);
+                p.save_training_state(&mut w);
+                for c in &critics {
+                    w.f32s(&c.params);
+                    w.f32s(&c.target);
+                    c.adam.save(&mut w);
+                }
+                actor_adam.save(&mut w);
+                w.f32(log_alpha);
+                alpha_adam.save(&mut w);
+                w.rng(&rng);
+                w.rng(&noise_rng);
+                w.rng(&sample_rng);
+                w.f32(credit);
+                w.u64(env_steps);
+                replay.save(&mut w);
+                w.envs(&venv);
+                Ok(w.finish())
+            };
+            if ctx.progress_resumable(env_steps, &mut policy, save)? == Control::Stop {
                 break;
             }
         }

@@ -38,7 +38,8 @@ enum Command {
     Circuit(circuit_cmd::CircuitArgs),
     /// Score your own logs: reliability metrics and IQM confidence intervals.
     Metrics(metrics_cmd::MetricsArgs),
-    /// Train one run per (task, algorithm, seed); resumable, shardable (`--shard i/N`).
+    /// Train one run per (task, algorithm, seed); resumable (SIGTERM/Ctrl-C write a resume point,
+    /// exit code 75; rerun to continue), shardable (`--shard i/N`).
     Train(pipeline_cmd::TrainArgs),
     /// Roll out trained policies and time their inference (RAM, power, energy too).
     Infer(pipeline_cmd::InferArgs),
@@ -55,9 +56,26 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     if let Err(err) = run(cli) {
+        if interrupted(&err) {
+            eprintln!(
+                "interrupted: rerun the same command to continue (exit code {})",
+                pipeline_cmd::EXIT_INTERRUPTED
+            );
+            std::process::exit(pipeline_cmd::EXIT_INTERRUPTED);
+        }
         eprintln!("error: {}", error_chain(&err));
         std::process::exit(1);
     }
+}
+
+/// Whether the pipelines stopped because SIGTERM or Ctrl-C asked them to.
+fn interrupted(err: &anyhow::Error) -> bool {
+    err.chain().any(|c| {
+        matches!(
+            c.downcast_ref::<a2perf_pipeline::PipelineError>(),
+            Some(a2perf_pipeline::PipelineError::Cancelled)
+        )
+    })
 }
 
 /// The error and its causes joined by `: `, leaving out a cause whose text the layer above

@@ -2,6 +2,7 @@
 //! pipelines in `a2perf_pipeline`. Parsing arguments and printing results is all it does.
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use a2perf_core::Registry;
 use a2perf_pipeline::{
@@ -31,6 +32,11 @@ pub struct TrainArgs {
     /// with more than one the system metrics cover all concurrent runs (the report says so).
     #[arg(long, default_value_t = 1)]
     pub jobs: usize,
+    /// After SIGTERM or Ctrl-C, seconds to wait for the runs in flight to write a resume point
+    /// at their next safe point; past that the process exits anyway (the runs then continue from
+    /// their last interval checkpoint). Exit code 75 either way.
+    #[arg(long, value_name = "SECONDS", default_value_t = 30.0)]
+    pub preempt_grace: f64,
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
@@ -113,6 +119,10 @@ pub struct RunArgs {
     /// Runs trained at the same time (0 = one per CPU).
     #[arg(long, default_value_t = 1)]
     pub jobs: usize,
+    /// After SIGTERM or Ctrl-C, seconds to wait for a safe point before exiting anyway (see
+    /// `a2perf train --help`).
+    #[arg(long, value_name = "SECONDS", default_value_t = 30.0)]
+    pub preempt_grace: f64,
     /// Report directory (default: the suite's `report_dir`, else `report/` in the first
     /// experiment directory).
     #[arg(short = 'o', long)]
@@ -158,22 +168,58 @@ pub enum CostArg {
     ProRata,
 }
 
-fn cancel_on_ctrl_c() -> CancelToken {
+/// Exit code of `train` and `run` when they stopped on SIGTERM or Ctrl-C (`EX_TEMPFAIL`): the
+/// runs in flight are resumable, so a wrapper (a Slurm requeue, a Kubernetes restart) should run
+/// the same command again.
+pub const EXIT_INTERRUPTED: i32 = 75;
+
+/// A cancel token set by the first SIGTERM or SIGINT: runs then write a resume point at their
+/// next safe point and stop, and the process exits with [`EXIT_INTERRUPTED`] — at the latest
+/// `grace` after the signal. A second SIGINT exits at once with 130, a second SIGTERM with 143.
+fn cancel_on_signals(grace: f64) -> Result<CancelToken> {
+    if !(grace.is_finite() && grace >= 0.0) {
+        anyhow::bail!("--preempt-grace must be a non-negative number of seconds, got {grace}");
+    }
     let token = CancelToken::new();
-    let t = token.clone();
-    let mut pressed = false;
-    // A second Ctrl-C exits at once; the first lets runs stop at their next progress call.
-    let _ = ctrlc::set_handler(move || {
-        if pressed {
-            std::process::exit(130);
-        }
-        pressed = true;
-        eprintln!(
-            "\ninterrupted: stopping runs (their directories stay resumable); Ctrl-C again to exit now"
-        );
-        t.cancel();
-    });
-    token
+    // Elsewhere the default handlers stay: a signal kills the process, and runs continue from
+    // their last interval checkpoint.
+    #[cfg(unix)]
+    {
+        use signal_hook::consts::{SIGINT, SIGTERM};
+        let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM])
+            .context("installing the SIGINT/SIGTERM handler")?;
+        let t = token.clone();
+        let grace = Duration::from_secs_f64(grace);
+        std::thread::spawn(move || {
+            for signal in signals.forever() {
+                let name = if signal == SIGTERM {
+                    "SIGTERM"
+                } else {
+                    "SIGINT"
+                };
+                if t.is_cancelled() {
+                    eprintln!("\n{name} again: exiting now");
+                    std::process::exit(128 + signal);
+                }
+                eprintln!(
+                    "\n{name}: runs write a resume point at their next safe point and stop \
+                     (exiting within {} s, code {EXIT_INTERRUPTED}); {name} again to exit now",
+                    grace.as_secs_f64()
+                );
+                t.cancel();
+                std::thread::spawn(move || {
+                    std::thread::sleep(grace);
+                    eprintln!(
+                        "no safe point within {} s: exiting; the runs continue from their newest \
+                         resume point",
+                        grace.as_secs_f64()
+                    );
+                    std::process::exit(EXIT_INTERRUPTED);
+                });
+            }
+        });
+    }
+    Ok(token)
 }
 
 fn expand_runs(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
@@ -216,12 +262,19 @@ fn train_plans(
 }
 
 fn print_train_summary(summary: &pipeline::TrainSummary) {
+    for (dir, warning) in &summary.warnings {
+        eprintln!("warning: {}: {warning}", dir.display());
+    }
+    for (dir, step) in &summary.resumed {
+        eprintln!("{}: resumed from step {step}", dir.display());
+    }
     let done = summary.with(&pipeline::RunOutcome::Completed).len();
     let skipped = summary.with(&pipeline::RunOutcome::Skipped).len();
     let cancelled = summary.with(&pipeline::RunOutcome::Cancelled).len();
     let failed = summary.failures().len();
     eprintln!(
-        "train: {done} trained, {skipped} already complete, {cancelled} not finished, {failed} failed"
+        "train: {done} trained, {skipped} already complete, {cancelled} interrupted (rerun to \
+         continue), {failed} failed"
     );
 }
 
@@ -229,7 +282,7 @@ fn print_train_summary(summary: &pipeline::TrainSummary) {
 pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
     let loaded = load(registry, &args.configs, &args.set, args.seeds.as_deref())?;
     let shard = args.shard.as_deref().map(str::parse).transpose()?;
-    let cancel = cancel_on_ctrl_c();
+    let cancel = cancel_on_signals(args.preempt_grace)?;
     train_plans(
         registry,
         &loaded.plans,
@@ -379,7 +432,7 @@ pub fn run(registry: &Registry, args: &RunArgs) -> Result<()> {
     let loaded = load(registry, &args.configs, &args.set, args.seeds.as_deref())?;
     let opts = pipeline::RunOptions {
         jobs: args.jobs,
-        cancel: cancel_on_ctrl_c(),
+        cancel: cancel_on_signals(args.preempt_grace)?,
         meters: pipeline::meters::system_meters(),
         show_progress: !args.quiet,
         report_dir: args.output.clone().or(loaded.report_dir),

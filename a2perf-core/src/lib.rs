@@ -12,6 +12,8 @@
 //! - [`RngStream`]: every random number, keyed by (seed, purpose).
 //! - [`config`]: RON experiment files with includes, overrides and precise errors.
 //! - [`results`]: atomic result files and resumable run directories.
+//! - [`resume`]: resume points, so that an interrupted training run continues exactly where it
+//!   stopped ([`TrainingContext::take_resume_state`], [`TrainingContext::progress_resumable`]).
 //! - [`alloc_count`]: a counting global allocator, to check that hot paths allocate nothing.
 //!
 //! ```
@@ -33,6 +35,7 @@ pub mod meter;
 pub mod policy;
 pub mod registry;
 pub mod results;
+pub mod resume;
 pub mod rng;
 pub mod rollout;
 pub mod space;
@@ -52,8 +55,9 @@ pub use registry::{
     TaskRef,
 };
 pub use results::{RunDir, RunState, RunStatus, write_atomic, write_json_atomic};
-pub use rng::RngStream;
+pub use resume::{NewestResume, ResumeDir, ResumePoint, ResumeWrite, TrainingProgress};
+pub use rng::{RngState, RngStream};
 pub use rollout::{ActMode, Episode, Transition, rollout};
 pub use space::{Action, Observation, Space, Tensor};
 pub use value::{ParamError, ParamKind, ParamSpec, Params, Value, did_you_mean};
-pub use vec_env::{VecEnv, VecStep};
+pub use vec_env::{EpisodeSnapshot, VecEnv, VecEnvSnapshot, VecStep, observation_hash};

@@ -1,8 +1,9 @@
 //! Results on disk: atomic writes and run directories that know whether they completed.
 //!
 //! Layout: `EXPERIMENT/RUN/…` with one run directory per (task, algorithm, seed). A run directory
-//! holds `status.json` (`{"state": "running" | "complete", …}`); files are written with
-//! [`write_atomic`] (temp file + rename), so a killed run loses at most the work in flight.
+//! holds `status.json` (`{"state": "running" | "interrupted" | "failed" | "complete", …}`); files
+//! are written with [`write_atomic`] (temp file + rename), so a killed run loses at most the work
+//! in flight.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -89,13 +90,31 @@ pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, Results
 }
 
 /// State of a run directory.
+///
+/// ```
+/// use a2perf_core::RunState;
+/// let s: RunState = serde_json::from_str("\"interrupted\"").unwrap();
+/// assert_eq!(s, RunState::Interrupted);
+/// assert!(!s.is_complete());
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RunState {
-    /// Started but not finished (possibly killed).
+    /// Started and not finished: in progress, or killed (`kill -9`, power loss) while running.
     Running,
+    /// Stopped on request (SIGTERM, Ctrl-C) at a safe point; rerunning continues it.
+    Interrupted,
+    /// Training failed (the note says why); rerunning tries again.
+    Failed,
     /// Finished; all results present.
     Complete,
+}
+
+impl RunState {
+    /// Whether training finished.
+    pub fn is_complete(self) -> bool {
+        self == RunState::Complete
+    }
 }
 
 /// Contents of `status.json`.
@@ -181,6 +200,20 @@ mod tests {
         assert!(!run.is_complete().unwrap());
         run.set_status(RunState::Complete, "done").unwrap();
         assert!(run.is_complete().unwrap());
+    }
+
+    #[test]
+    fn old_status_files_still_read() {
+        let tmp = tempfile::tempdir().unwrap();
+        let run = RunDir::new(tmp.path());
+        std::fs::write(run.file("status.json"), br#"{"state": "running"}"#).unwrap();
+        assert_eq!(run.status().unwrap().unwrap().state, RunState::Running);
+        for state in [RunState::Interrupted, RunState::Failed] {
+            run.set_status(state, "why").unwrap();
+            let back = run.status().unwrap().unwrap();
+            assert_eq!((back.state, back.note.as_str()), (state, "why"));
+            assert!(!run.is_complete().unwrap());
+        }
     }
 
     #[test]

@@ -649,9 +649,10 @@ impl Env for LocomotionEnv {
         };
         self.substeps = 0;
         self.steps = 0;
-        // A fresh physics world every episode: rapier keeps contact manifolds, warm-start
-        // impulses and broad-phase pairs across `set_state`, so the first steps after a seeded
-        // reset depended on the previous episode.
+        // A fresh physics world: rapier keeps contact manifolds (warm-start impulses), islands
+        // and broad-phase structure across a teleport, so a reused world would make an episode
+        // depend on the episodes before it. Fresh, an episode is a function of its seed and
+        // actions (Gymnasium's reset contract), which also lets resumed training replay it.
         self.sim = Simulation::new(&self.model, self.sim.config().clone());
         // 1. Robot to the initial position and default pose.
         let (x, y, z) = self.model.init_position;

@@ -29,13 +29,15 @@
 //!
 //! | file | written by | contents |
 //! |---|---|---|
-//! | `status.json` | train | `running` or `complete` (reruns skip complete runs) |
+//! | `status.json` | train | `running`, `interrupted`, `failed` or `complete` (reruns skip complete runs and continue the others) |
 //! | `run.json` | train | [`RunRecord`]: task, resolved parameters, seed, settings |
 //! | `operative_config.ron` | train | every config value in force (when a config file was used) |
 //! | `system_info.json` | train | [`SystemInfo`] of the machine |
 //! | `curve.csv`, `curve.json` | train | evaluation return against environment steps |
-//! | `train_system.json` | train | system meters over the whole training |
+//! | `train_system.json` | train | system meters over the whole training (all segments) |
+//! | `train_segments.json` | train | each training segment (process): start step, outcome, meters, resume points written |
 //! | `checkpoints/step_*.ckpt` | train | checkpoints at the configured interval |
+//! | `resume/step_*.resume` | train | the newest two resume points, while the run is unfinished |
 //! | `policy.ckpt` | train | the final policy |
 //! | `inference.json` | infer | rollout returns, per-call inference time, meters |
 //! | `generalization.json` | generalize | per-task mean returns and their sum |
@@ -78,7 +80,9 @@ pub use plan::{
 };
 pub use run::{RunEvent, RunOptions, expand_runs, run_experiments};
 pub use sysinfo::SystemInfo;
-pub use train::{MeterFactory, RunOutcome, TrainOptions, TrainSummary, train, train_one};
+pub use train::{
+    MeterFactory, RunOutcome, RunReport, TrainOptions, TrainSummary, train, train_one, train_run,
+};
 
 /// `run.json`.
 pub const RUN_FILE: &str = "run.json";
@@ -94,6 +98,10 @@ pub const SYSTEM_INFO_FILE: &str = "system_info.json";
 pub const POLICY_FILE: &str = "policy.ckpt";
 /// `checkpoints/`.
 pub const CHECKPOINT_DIR: &str = "checkpoints";
+/// `resume/`: resume points of an unfinished run (see [`a2perf_core::ResumeDir`]).
+pub const RESUME_DIR: &str = "resume";
+/// `train_segments.json`: one entry per process that trained the run.
+pub const TRAIN_SEGMENTS_FILE: &str = "train_segments.json";
 /// `inference.json`.
 pub const INFERENCE_FILE: &str = "inference.json";
 /// `generalization.json`.

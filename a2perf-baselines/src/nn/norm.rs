@@ -56,6 +56,26 @@ impl RunningNorm {
         self.count += n as f64;
     }
 
+    /// Writes the statistics (for resumable training).
+    pub(crate) fn save(&self, w: &mut crate::resume::StateWriter) {
+        w.f64s(&self.mean);
+        w.f64s(&self.var);
+        w.f64(self.count);
+        w.f32(self.clip);
+    }
+
+    /// Restores what [`save`](Self::save) wrote; the dimension must match.
+    pub(crate) fn load(
+        &mut self,
+        r: &mut crate::resume::StateReader<'_>,
+    ) -> Result<(), a2perf_core::RunError> {
+        r.f64s_into("normalisation means", &mut self.mean)?;
+        r.f64s_into("normalisation variances", &mut self.var)?;
+        self.count = r.f64()?;
+        self.clip = r.f32()?;
+        Ok(())
+    }
+
     /// Normalises `row` (length `dim`) in place.
     pub fn apply(&self, row: &mut [f32]) {
         for ((x, m), v) in row.iter_mut().zip(&self.mean).zip(&self.var) {
@@ -83,6 +103,23 @@ impl RewardScaler {
             gamma,
             stats: RunningNorm::new(1),
         }
+    }
+
+    /// Writes the running returns and statistics (for resumable training).
+    pub(crate) fn save(&self, w: &mut crate::resume::StateWriter) {
+        w.f64s(&self.returns);
+        w.f64(self.gamma);
+        self.stats.save(w);
+    }
+
+    /// Restores what [`save`](Self::save) wrote; the number of streams must match.
+    pub(crate) fn load(
+        &mut self,
+        r: &mut crate::resume::StateReader<'_>,
+    ) -> Result<(), a2perf_core::RunError> {
+        r.f64s_into("reward scaler returns", &mut self.returns)?;
+        self.gamma = r.f64()?;
+        self.stats.load(r)
     }
 
     /// Updates the return of stream `env` with `reward` and returns the scaled reward.

@@ -34,6 +34,31 @@ impl Adam {
         self.t
     }
 
+    /// Writes the moments and step count (for resumable training).
+    pub(crate) fn save(&self, w: &mut crate::resume::StateWriter) {
+        w.f32(self.beta1);
+        w.f32(self.beta2);
+        w.f32(self.eps);
+        w.f32s(&self.m);
+        w.f32s(&self.v);
+        w.u64(self.t);
+    }
+
+    /// Restores what [`save`](Self::save) wrote; the parameter count must match.
+    pub(crate) fn load(
+        &mut self,
+        what: &str,
+        r: &mut crate::resume::StateReader<'_>,
+    ) -> Result<(), a2perf_core::RunError> {
+        self.beta1 = r.f32()?;
+        self.beta2 = r.f32()?;
+        self.eps = r.f32()?;
+        r.f32s_into(&format!("{what} Adam first moments"), &mut self.m)?;
+        r.f32s_into(&format!("{what} Adam second moments"), &mut self.v)?;
+        self.t = r.u64()?;
+        Ok(())
+    }
+
     /// One descent step `params −= lr · m̂ / (√v̂ + eps)`.
     ///
     /// ```

@@ -4,7 +4,9 @@
 //! three things a participant writes:
 //!
 //! 1. an [`Algorithm`] that trains a [`Policy`], reporting its curve and checkpoints through the
-//!    [`TrainingContext`] ([`RandomSearch`]: hill climbing on a linear policy);
+//!    [`TrainingContext`] ([`RandomSearch`]: hill climbing on a linear policy), and opting in to
+//!    resumable training: it saves its whole state when the context asks, and continues from it
+//!    when the context hands it back, so an interrupted run resumes exactly;
 //! 2. a loader that rebuilds the policy from its [`Checkpoint`] ([`load_policy`]);
 //! 3. a `register` function adding both to a [`Registry`] (here with a tiny environment,
 //!    [`Corridor`], and its generalization suite, so the whole pipeline can be tried in seconds).
@@ -254,10 +256,34 @@ pub fn load_policy(ckpt: &Checkpoint, spec: &EnvSpec) -> Result<Box<dyn Policy>,
 
 /// Hill climbing on a linear policy: perturb the weights, keep the candidate if its return over a
 /// few seeded episodes is at least as good.
+///
+/// It opts in to resumable training (see [`TrainingContext`]): everything the rest of the run
+/// depends on is in [`SearchState`], which it hands to
+/// [`progress_resumable`](TrainingContext::progress_resumable) and takes back with
+/// [`take_resume_state`](TrainingContext::take_resume_state). Its episodes are reset with explicit
+/// seeds, so no environment state needs saving.
 #[derive(Debug)]
 pub struct RandomSearch {
     noise: f64,
     episodes_per_candidate: usize,
+}
+
+/// Everything [`RandomSearch`] needs to continue exactly where it stopped.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct SearchState {
+    /// The best weights so far, as raw bits (decimal JSON floats would almost always round-trip;
+    /// bits make it certain).
+    pub best_bits: Vec<u32>,
+    /// The perturbation stream, at its exact position.
+    pub noise: RngStream,
+    /// Environment steps consumed.
+    pub steps: u64,
+    /// Candidates tried (it numbers the episode seeds of the next one).
+    pub candidate_index: u64,
+}
+
+fn resume_error(e: impl std::fmt::Display) -> RunError {
+    RunError::Resume(e.to_string())
 }
 
 impl Algorithm for RandomSearch {
@@ -273,6 +299,20 @@ impl Algorithm for RandomSearch {
         let episode_seeds = ctx.rng("random_search/episodes");
         let mut steps = 0u64;
         let mut candidate_index = 0u64;
+        if let Some(bytes) = ctx.take_resume_state() {
+            let state: SearchState = serde_json::from_slice(&bytes).map_err(resume_error)?;
+            if state.best_bits.len() != best.weights.len() {
+                return Err(resume_error(format!(
+                    "{} weights saved, the policy has {}",
+                    state.best_bits.len(),
+                    best.weights.len()
+                )));
+            }
+            best.weights = state.best_bits.iter().map(|b| f32::from_bits(*b)).collect();
+            noise = state.noise;
+            steps = state.steps;
+            candidate_index = state.candidate_index;
+        }
         let score = |policy: &mut LinearPolicy,
                      env: &mut Box<dyn Env>,
                      steps: &mut u64,
@@ -291,7 +331,16 @@ impl Algorithm for RandomSearch {
             Ok(total / self.episodes_per_candidate as f64)
         };
         loop {
-            if ctx.progress(steps, &mut best)? == Control::Stop {
+            let save = |best: &LinearPolicy| {
+                serde_json::to_vec(&SearchState {
+                    best_bits: best.weights.iter().map(|w| w.to_bits()).collect(),
+                    noise: noise.clone(),
+                    steps,
+                    candidate_index,
+                })
+                .map_err(resume_error)
+            };
+            if ctx.progress_resumable(steps, &mut best, save)? == Control::Stop {
                 break;
             }
             candidate_index += 1;
@@ -387,9 +436,54 @@ pub fn register(reg: &mut Registry) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use a2perf_core::{CancelToken, DiscardCheckpoints, TrainingSettings};
+    use a2perf_core::{
+        CancelToken, CheckpointSink, DiscardCheckpoints, ResumePoint, TrainingSettings,
+    };
 
-    fn train(seed: u64) -> (Vec<(u64, f64)>, Checkpoint) {
+    /// Keeps resume points in memory and cancels `cancel` once the first one is written.
+    #[derive(Default)]
+    struct Points {
+        kept: Vec<ResumePoint>,
+        cancel: Option<CancelToken>,
+    }
+
+    impl CheckpointSink for Points {
+        fn save(&mut self, _: u64, _: &Checkpoint) -> std::io::Result<()> {
+            Ok(())
+        }
+        fn keeps_resume_points(&self) -> bool {
+            true
+        }
+        fn save_resume(&mut self, point: &ResumePoint) -> std::io::Result<u64> {
+            self.kept
+                .push(ResumePoint::from_bytes(&point.to_bytes()).map_err(std::io::Error::other)?);
+            if let Some(c) = &self.cancel {
+                c.cancel();
+            }
+            Ok(0)
+        }
+    }
+
+    fn settings() -> TrainingSettings {
+        TrainingSettings {
+            total_env_steps: 2_000,
+            eval_interval: 500,
+            eval_episodes: 4,
+            checkpoint_interval: 600,
+            ..Default::default()
+        }
+    }
+
+    /// The curve, the final policy's checkpoint and the step training resumed from.
+    type Trained = (Vec<(u64, f64)>, Checkpoint, Option<u64>);
+
+    /// Trains on the corridor into `sink`, from `resume` if given.
+    fn train_with(
+        seed: u64,
+        sink: &mut dyn CheckpointSink,
+        cancel: CancelToken,
+        resume: Option<ResumePoint>,
+    ) -> Result<Trained, RunError> {
         let mut reg = Registry::new();
         register(&mut reg);
         let entry = reg.env(CORRIDOR_ID).unwrap().clone();
@@ -398,16 +492,50 @@ mod tests {
         let mut algo = reg
             .make_algorithm("random_search", &BTreeMap::new())
             .unwrap();
-        let settings = TrainingSettings {
-            total_env_steps: 2_000,
-            eval_interval: 500,
-            eval_episodes: 4,
+        let mut ctx = TrainingContext::new(&factory, seed, settings(), sink, cancel);
+        if let Some(p) = resume {
+            ctx = ctx.with_resume(p);
+        }
+        let policy = algo.train(&mut ctx)?;
+        Ok((
+            ctx.curve().returns(),
+            policy.checkpoint().unwrap(),
+            ctx.resumed_from(),
+        ))
+    }
+
+    fn train(seed: u64) -> (Vec<(u64, f64)>, Checkpoint) {
+        let (curve, ckpt, _) =
+            train_with(seed, &mut DiscardCheckpoints, CancelToken::new(), None).unwrap();
+        (curve, ckpt)
+    }
+
+    #[test]
+    fn an_interrupted_run_resumes_to_the_uninterrupted_result() {
+        let (curve, ckpt) = train(4);
+        // Interrupted as soon as its first resume point (at the 600-step interval) is written:
+        // the next progress call, mid-interval, writes another and stops.
+        let cancel = CancelToken::new();
+        let mut sink = Points {
+            cancel: Some(cancel.clone()),
             ..Default::default()
         };
-        let mut sink = DiscardCheckpoints;
-        let mut ctx = TrainingContext::new(&factory, seed, settings, &mut sink, CancelToken::new());
-        let policy = algo.train(&mut ctx).unwrap();
-        (ctx.curve().returns(), policy.checkpoint().unwrap())
+        let stopped = train_with(4, &mut sink, cancel, None);
+        assert!(matches!(stopped, Err(RunError::Cancelled)));
+        let steps: Vec<u64> = sink.kept.iter().map(|p| p.progress.env_steps).collect();
+        assert_eq!(steps.len(), 2, "{steps:?}");
+        assert!(
+            steps[0] >= 600 && steps[1] > steps[0] && steps[1] < 1200,
+            "{steps:?}"
+        );
+        for point in sink.kept {
+            let from = point.progress.env_steps;
+            let (c, k, resumed) =
+                train_with(4, &mut DiscardCheckpoints, CancelToken::new(), Some(point)).unwrap();
+            assert_eq!(resumed, Some(from));
+            assert_eq!(c, curve, "resumed from {from}");
+            assert_eq!(k, ckpt, "resumed from {from}");
+        }
     }
 
     #[test]
