@@ -192,34 +192,6 @@ fn an_episode_depends_only_on_its_seed_and_actions() {
 }
 
 #[test]
-fn a_seeded_reset_does_not_depend_on_the_previous_episode() {
-    let action = Action::Continuous(vec![0.3; 12]);
-    let first_step = |e: &mut LocomotionEnv| {
-        let mut obs = Observation::default();
-        e.reset_into(Some(123), &mut obs).unwrap();
-        let mut step = Step::default();
-        e.step_into(&action, &mut step).unwrap();
-        (
-            obs.flat_values(),
-            step.observation.flat_values(),
-            step.reward,
-        )
-    };
-    let mut e = env(Gait::Pace);
-    let fresh = first_step(&mut e);
-    // Physics state left by an earlier episode (contacts, warm-start impulses) must not leak.
-    let mut step = Step::default();
-    for _ in 0..20 {
-        e.step_into(&action, &mut step).unwrap();
-        if step.done() {
-            break;
-        }
-    }
-    assert_eq!(first_step(&mut e), fresh);
-    assert_eq!(first_step(&mut e), fresh);
-}
-
-#[test]
 fn observation_layout_after_reset() {
     let mut e = env(Gait::Spin);
     let obs = e.reset(Some(4)).unwrap();
