@@ -321,7 +321,7 @@ impl NetPolicy {
                 ckpt.format_version
             )));
         }
-        let mut r = Reader(&ckpt.payload);
+        let mut r = a2perf_core::bytes::ByteReader::new(&ckpt.payload);
         if r.take(4)? != MAGIC {
             return Err(bad(
                 "payload is not an a2perf-baselines network (bad magic)".into(),
@@ -432,10 +432,10 @@ impl NetPolicy {
                 stats,
             })
         };
-        if !r.0.is_empty() {
+        if r.remaining() != 0 {
             return Err(bad(format!(
                 "{} trailing bytes after the payload",
-                r.0.len()
+                r.remaining()
             )));
         }
         if params.iter().any(|p| !p.is_finite()) {
@@ -516,32 +516,6 @@ pub fn squash_to_bounds(x: f32, l: f32, h: f32, limit: f32) -> f32 {
     let half = 0.5 * (h - l);
     let half = if limit > 0.0 { half.min(limit) } else { half };
     centre + x * half
-}
-
-struct Reader<'a>(&'a [u8]);
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8], PolicyError> {
-        if self.0.len() < n {
-            return Err(PolicyError::BadCheckpoint("payload is truncated".into()));
-        }
-        let (h, t) = self.0.split_at(n);
-        self.0 = t;
-        Ok(h)
-    }
-    fn u32(&mut self) -> Result<u32, PolicyError> {
-        let b = self.take(4)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-    fn u64(&mut self) -> Result<u64, PolicyError> {
-        let b = self.take(8)?;
-        let mut a = [0u8; 8];
-        a.copy_from_slice(b);
-        Ok(u64::from_le_bytes(a))
-    }
-    fn f64(&mut self) -> Result<f64, PolicyError> {
-        Ok(f64::from_bits(self.u64()?))
-    }
 }
 
 impl Policy for NetPolicy {

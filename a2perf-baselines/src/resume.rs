@@ -7,6 +7,7 @@
 //! network sizes, another number of environments) is refused with
 //! [`RunError::Resume`](a2perf_core::RunError::Resume), never silently misread.
 
+use a2perf_core::bytes::{ByteReader, Truncated};
 use a2perf_core::{Action, EpisodeSnapshot, RngState, RngStream, RunError, VecEnv, VecEnvSnapshot};
 
 const MAGIC: &[u8; 4] = b"A2ST";
@@ -149,17 +150,23 @@ impl StateWriter {
 
 /// Reads a training state written by [`StateWriter`].
 pub(crate) struct StateReader<'a> {
-    rest: &'a [u8],
+    bytes: ByteReader<'a>,
 }
 
 pub(crate) fn resume_err(m: impl Into<String>) -> RunError {
     RunError::Resume(m.into())
 }
 
+fn truncated(e: Truncated) -> RunError {
+    resume_err(format!("the training state is {e}"))
+}
+
 impl<'a> StateReader<'a> {
     /// Checks the magic, the algorithm and the version.
     pub(crate) fn new(bytes: &'a [u8], algorithm: &str, version: u32) -> Result<Self, RunError> {
-        let mut r = Self { rest: bytes };
+        let mut r = Self {
+            bytes: ByteReader::new(bytes),
+        };
         if r.take(4)? != MAGIC {
             return Err(resume_err(
                 "the resume state is not an a2perf-baselines training state (bad magic)",
@@ -182,34 +189,26 @@ impl<'a> StateReader<'a> {
 
     /// Fails unless every byte was read.
     pub(crate) fn finish(self) -> Result<(), RunError> {
-        if self.rest.is_empty() {
+        if self.bytes.remaining() == 0 {
             Ok(())
         } else {
             Err(resume_err(format!(
                 "{} unexpected bytes at the end of the training state",
-                self.rest.len()
+                self.bytes.remaining()
             )))
         }
     }
 
     fn take(&mut self, n: usize) -> Result<&'a [u8], RunError> {
-        if self.rest.len() < n {
-            return Err(resume_err("the training state is truncated"));
-        }
-        let (h, t) = self.rest.split_at(n);
-        self.rest = t;
-        Ok(h)
+        self.bytes.take(n).map_err(truncated)
     }
 
     pub(crate) fn u32(&mut self) -> Result<u32, RunError> {
-        let b = self.take(4)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        self.bytes.u32().map_err(truncated)
     }
 
     pub(crate) fn u64(&mut self) -> Result<u64, RunError> {
-        let mut a = [0u8; 8];
-        a.copy_from_slice(self.take(8)?);
-        Ok(u64::from_le_bytes(a))
+        self.bytes.u64().map_err(truncated)
     }
 
     pub(crate) fn usize(&mut self) -> Result<usize, RunError> {
@@ -225,11 +224,11 @@ impl<'a> StateReader<'a> {
     }
 
     pub(crate) fn f32(&mut self) -> Result<f32, RunError> {
-        Ok(f32::from_bits(self.u32()?))
+        self.bytes.f32().map_err(truncated)
     }
 
     pub(crate) fn f64(&mut self) -> Result<f64, RunError> {
-        Ok(f64::from_bits(self.u64()?))
+        self.bytes.f64().map_err(truncated)
     }
 
     pub(crate) fn str(&mut self) -> Result<String, RunError> {
@@ -240,7 +239,7 @@ impl<'a> StateReader<'a> {
     /// A length prefix, checked against what is left (`width` bytes per element).
     fn len_of(&mut self, width: usize) -> Result<usize, RunError> {
         let n = self.usize()?;
-        if n.saturating_mul(width) > self.rest.len() {
+        if n.saturating_mul(width) > self.bytes.remaining() {
             return Err(resume_err("a length exceeds the training state"));
         }
         Ok(n)

@@ -29,6 +29,7 @@
 #![warn(missing_docs)]
 
 pub mod alloc_count;
+pub mod bytes;
 pub mod config;
 pub mod env;
 pub mod meter;

@@ -27,6 +27,12 @@ pub enum PolicyError {
     BadCheckpoint(String),
 }
 
+impl From<crate::bytes::Truncated> for PolicyError {
+    fn from(e: crate::bytes::Truncated) -> Self {
+        PolicyError::BadCheckpoint(format!("the data is {e}"))
+    }
+}
+
 /// A trained (or training) policy: maps observations to actions.
 pub trait Policy: Send {
     /// Chooses an action for `obs`. `ActMode::Greedy` must be deterministic; `ActMode::Explore`
@@ -152,37 +158,29 @@ impl Checkpoint {
     /// Decodes and verifies a checkpoint container.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, PolicyError> {
         let bad = |m: &str| PolicyError::BadCheckpoint(m.to_string());
-        let mut rest = bytes;
-        let mut take = |n: usize| -> Result<&[u8], PolicyError> {
-            if rest.len() < n {
-                return Err(bad("file is truncated"));
-            }
-            let (head, tail) = rest.split_at(n);
-            rest = tail;
-            Ok(head)
-        };
-        if take(8)? != CHECKPOINT_MAGIC {
+        let mut r = crate::bytes::ByteReader::new(bytes);
+        if r.take(8)? != CHECKPOINT_MAGIC {
             return Err(bad("not an a2perf checkpoint (bad magic bytes)"));
         }
-        let container = u32::from_le_bytes(take(4)?.try_into().map_err(|_| bad("truncated"))?);
+        let container = r.u32()?;
         if container != CONTAINER_VERSION {
             return Err(PolicyError::BadCheckpoint(format!(
                 "container version {container} is not supported (expected {CONTAINER_VERSION})"
             )));
         }
-        let name_len = u32::from_le_bytes(take(4)?.try_into().map_err(|_| bad("truncated"))?);
+        let name_len = r.u32()?;
         if name_len > 256 {
             return Err(bad("algorithm name is implausibly long"));
         }
-        let algorithm = std::str::from_utf8(take(name_len as usize)?)
+        let algorithm = std::str::from_utf8(r.take(name_len as usize)?)
             .map_err(|_| bad("algorithm name is not UTF-8"))?
             .to_string();
-        let format_version = u32::from_le_bytes(take(4)?.try_into().map_err(|_| bad("truncated"))?);
-        let len = u64::from_le_bytes(take(8)?.try_into().map_err(|_| bad("truncated"))?);
-        let sum = u64::from_le_bytes(take(8)?.try_into().map_err(|_| bad("truncated"))?);
+        let format_version = r.u32()?;
+        let len = r.u64()?;
+        let sum = r.u64()?;
         let len = usize::try_from(len).map_err(|_| bad("payload length overflows"))?;
-        let payload = take(len)?.to_vec();
-        if !rest.is_empty() {
+        let payload = r.take(len)?.to_vec();
+        if r.remaining() != 0 {
             return Err(bad("trailing bytes after payload"));
         }
         if fnv1a64(&[&payload]) != sum {

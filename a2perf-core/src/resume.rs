@@ -24,6 +24,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::bytes::ByteReader;
 use crate::policy::{Checkpoint, CurvePoint, LearningCurve, PolicyError};
 
 /// Version of the resume-point payload written by [`ResumePoint::to_bytes`].
@@ -124,7 +125,7 @@ impl ResumePoint {
                 ckpt.format_version
             )));
         }
-        let mut r = ByteReader(&ckpt.payload);
+        let mut r = ByteReader::new(&ckpt.payload);
         if r.take(8)? != RESUME_MAGIC {
             return Err(bad("not a resume point (bad magic bytes)".into()));
         }
@@ -137,25 +138,25 @@ impl ResumePoint {
         let env_steps = r.u64()?;
         let next_eval = r.u64()?;
         let next_checkpoint = r.u64()?;
-        let has_last = r.take(1)?[0] != 0;
+        let has_last = r.u8()? != 0;
         let last = r.u64()?;
-        let clock_s = f64::from_bits(r.u64()?);
+        let clock_s = r.f64()?;
         let n = r.u32()? as usize;
-        if n > r.0.len() / 32 {
+        if n > r.remaining() / 32 {
             return Err(bad("curve length exceeds the payload".into()));
         }
         let mut points = Vec::with_capacity(n);
         for _ in 0..n {
             points.push(CurvePoint {
                 env_steps: r.u64()?,
-                mean_return: f64::from_bits(r.u64()?),
-                std_return: f64::from_bits(r.u64()?),
-                wall_seconds: f64::from_bits(r.u64()?),
+                mean_return: r.f64()?,
+                std_return: r.f64()?,
+                wall_seconds: r.f64()?,
             });
         }
         let len = usize::try_from(r.u64()?).map_err(|_| bad("state length overflows".into()))?;
         let state = r.take(len)?.to_vec();
-        if !r.0.is_empty() {
+        if r.remaining() != 0 {
             return Err(bad("trailing bytes after the state".into()));
         }
         Ok(Self {
@@ -169,30 +170,6 @@ impl ResumePoint {
             },
             state,
         })
-    }
-}
-
-struct ByteReader<'a>(&'a [u8]);
-
-impl<'a> ByteReader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8], PolicyError> {
-        if self.0.len() < n {
-            return Err(PolicyError::BadCheckpoint(
-                "resume point is truncated".into(),
-            ));
-        }
-        let (h, t) = self.0.split_at(n);
-        self.0 = t;
-        Ok(h)
-    }
-    fn u32(&mut self) -> Result<u32, PolicyError> {
-        let b = self.take(4)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-    fn u64(&mut self) -> Result<u64, PolicyError> {
-        let mut a = [0u8; 8];
-        a.copy_from_slice(self.take(8)?);
-        Ok(u64::from_le_bytes(a))
     }
 }
 
