@@ -66,11 +66,16 @@ def web_step_us(steps: int) -> tuple[float, float]:
     return float(times.mean() / 1e3), float(np.median(times) / 1e3)
 
 
-def vector_steps_per_s(make, n: int, steps: int) -> float:
+def vector_steps_per_s(make, n: int, steps: int, zero: bool = False) -> float:
+    """Env steps/s of a vector env. Random uniform actions topple the robot every ~10 steps, so
+    step times vary a lot (contacts) and lockstep stepping waits for the slowest env; zero actions
+    (standing, the fixed-pose baseline) give near-uniform step times."""
     venv = make(n)
     rng = np.random.default_rng(0)
     low, high = venv.single_action_space.low, venv.single_action_space.high
     actions = rng.uniform(low, high, (steps, n, 12)).astype(np.float32)
+    if zero:
+        actions[:] = 0.0
     venv.reset(seed=0)
     t = time.perf_counter()
     for a in actions:
@@ -123,6 +128,11 @@ def main() -> None:
     for n in (1, 2, 8):
         res[f"make_vec_{n}_steps_per_s"] = vector_steps_per_s(native, n, vsteps)
         res[f"async_{n}_steps_per_s"] = vector_steps_per_s(asynch, n, vsteps)
+        res[f"make_vec_{n}_zero_steps_per_s"] = vector_steps_per_s(native, n, vsteps, zero=True)
+        res[f"async_{n}_zero_steps_per_s"] = vector_steps_per_s(asynch, n, vsteps, zero=True)
+    for kind in ("", "_zero"):
+        one = res[f"make_vec_1{kind}_steps_per_s"]
+        res[f"make_vec_2{kind}_speedup"] = res[f"make_vec_2{kind}_steps_per_s"] / one
     if Path(args.shared, "circuit", "ariane133_ng45").exists():
         res.update(placement_cost_ms(Path(args.shared), int(200 * k) or 20))
     res["load_average_after"] = os.getloadavg()
