@@ -166,9 +166,10 @@ impl DiscreteNet {
             web_arch(spec, layout, opts, n, with_value, &mut alloc),
         ) {
             a
-        } else if let (true, Some(a)) =
-            (auto, circuit_arch(spec, layout, opts, n, with_value, &mut alloc))
-        {
+        } else if let (true, Some(a)) = (
+            auto,
+            circuit_arch(spec, layout, opts, n, with_value, &mut alloc),
+        ) {
             a
         } else {
             alloc = ParamAlloc::new();

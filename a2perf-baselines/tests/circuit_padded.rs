@@ -61,13 +61,20 @@ fn padded_scores_and_gradients_are_the_grid_ones_at_the_circuit_crates_padded_ac
             DiscreteNet::for_spec(padded.spec(), &layouts[1], &opts, true).unwrap(),
         ];
         assert_eq!(nets[0].kind(), "circuit", "{id}");
-        assert_eq!(nets[1].kind(), "circuit", "{id}: the padded layout fell back to an MLP");
+        assert_eq!(
+            nets[1].kind(),
+            "circuit",
+            "{id}: the padded layout fell back to an MLP"
+        );
         assert_eq!(nets[0].num_params(), nets[1].num_params(), "{id}");
         assert_eq!(nets[1].num_actions(), 128 * 128);
         let weights = nets[0].init_params(&mut RngStream::new(7, "weights"));
 
         // Two observations: the first macro, and after a few legal placements.
-        let first = [plain.reset(Some(3)).unwrap(), padded.reset(Some(3)).unwrap()];
+        let first = [
+            plain.reset(Some(3)).unwrap(),
+            padded.reset(Some(3)).unwrap(),
+        ];
         let mut rng = RngStream::new(1, "moves");
         let mut last = first.clone();
         for _ in 0..3 {
@@ -86,7 +93,10 @@ fn padded_scores_and_gradients_are_the_grid_ones_at_the_circuit_crates_padded_ac
         let pairs = [first, last];
         // The environments agree on what is legal, through the same map.
         for [p, q] in &pairs {
-            let (pm, qm) = (p.action_mask.as_ref().unwrap(), q.action_mask.as_ref().unwrap());
+            let (pm, qm) = (
+                p.action_mask.as_ref().unwrap(),
+                q.action_mask.as_ref().unwrap(),
+            );
             assert_eq!((pm.len(), qm.len()), (cells, 128 * 128));
             for (cell, &legal) in pm.iter().enumerate() {
                 assert_eq!(qm[cell_to_padded_action(cell, cols, rows)], legal, "{id}");
@@ -115,7 +125,11 @@ fn padded_scores_and_gradients_are_the_grid_ones_at_the_circuit_crates_padded_ac
                 cell_of[a] = Some(cell);
             }
             for (a, &z) in padded_logits.iter().enumerate() {
-                assert_eq!(padded_action_to_cell(a, cols, rows), cell_of[a], "{id}: action {a}");
+                assert_eq!(
+                    padded_action_to_cell(a, cols, rows),
+                    cell_of[a],
+                    "{id}: action {a}"
+                );
                 if cell_of[a].is_none() {
                     assert_eq!(z, f32::NEG_INFINITY, "{id}: padding action {a} scored {z}");
                 }
@@ -136,8 +150,20 @@ fn padded_scores_and_gradients_are_the_grid_ones_at_the_circuit_crates_padded_ac
         }
         let dvalues = [0.3f32, -1.2];
         let mut grads = [vec![0.0f32; weights.len()], vec![0.0f32; weights.len()]];
-        nets[0].backward(&weights, &mut grads[0], &batches[0], &dplain, Some(&dvalues));
-        nets[1].backward(&weights, &mut grads[1], &batches[1], &dpadded, Some(&dvalues));
+        nets[0].backward(
+            &weights,
+            &mut grads[0],
+            &batches[0],
+            &dplain,
+            Some(&dvalues),
+        );
+        nets[1].backward(
+            &weights,
+            &mut grads[1],
+            &batches[1],
+            &dpadded,
+            Some(&dvalues),
+        );
         assert!(grads[0].iter().any(|g| *g != 0.0));
         assert_eq!(
             grads[0].iter().map(|g| g.to_bits()).collect::<Vec<_>>(),
@@ -164,7 +190,10 @@ fn train(reg: &Registry, algo: &str, padded: bool) -> (Checkpoint, Vec<(u64, f64
     let mut sink = DiscardCheckpoints;
     let mut ctx = TrainingContext::new(&factory, 3, settings, &mut sink, CancelToken::new());
     let hp: Vec<(&str, Value)> = match algo {
-        "ppo" => vec![("num_steps", Value::Int(24)), ("minibatch_size", Value::Int(16))],
+        "ppo" => vec![
+            ("num_steps", Value::Int(24)),
+            ("minibatch_size", Value::Int(16)),
+        ],
         _ => vec![
             ("learning_starts", Value::Int(24)),
             ("batch_size", Value::Int(16)),
@@ -173,7 +202,9 @@ fn train(reg: &Registry, algo: &str, padded: bool) -> (Checkpoint, Vec<(u64, f64
     };
     let hp: BTreeMap<String, Value> = hp.into_iter().map(|(k, v)| (k.to_string(), v)).collect();
     let mut alg = reg.make_algorithm(algo, &hp).expect(algo);
-    let policy = alg.train(&mut ctx).unwrap_or_else(|e| panic!("{algo}: {e}"));
+    let policy = alg
+        .train(&mut ctx)
+        .unwrap_or_else(|e| panic!("{algo}: {e}"));
     (
         policy.checkpoint().expect("checkpoint"),
         ctx.curve().returns(),

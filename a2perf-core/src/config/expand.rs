@@ -100,9 +100,9 @@ fn process_env(name: &str) -> Result<Option<String>, String> {
     match std::env::var(name) {
         Ok(v) => Ok(Some(v)),
         Err(std::env::VarError::NotPresent) => Ok(None),
-        Err(std::env::VarError::NotUnicode(_)) => Err(format!(
-            "environment variable `{name}` is not valid UTF-8"
-        )),
+        Err(std::env::VarError::NotUnicode(_)) => {
+            Err(format!("environment variable `{name}` is not valid UTF-8"))
+        }
     }
 }
 
@@ -179,7 +179,16 @@ mod tests {
 
     #[test]
     fn text_without_references_is_unchanged() {
-        for t in ["", "plain/path.txt", "a$b", "cost$", "$ {X}", "x{y}", "$$", "$$x"] {
+        for t in [
+            "",
+            "plain/path.txt",
+            "a$b",
+            "cost$",
+            "$ {X}",
+            "x{y}",
+            "$$",
+            "$$x",
+        ] {
             assert_eq!(with(&[], t).unwrap(), t, "{t}");
         }
         assert_eq!(with(&[("X", "v")], "$${X}").unwrap(), "${X}");

@@ -782,7 +782,10 @@ fn string_values_expand_environment_variables_in_every_section() {
     // Cargo sets CARGO_MANIFEST_DIR for the test process; reading it avoids `set_var`, which is
     // unsound while other test threads read the environment.
     let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap();
-    assert!(std::env::var(UNSET_VAR).is_err(), "{UNSET_VAR} must not be set");
+    assert!(
+        std::env::var(UNSET_VAR).is_err(),
+        "{UNSET_VAR} must not be set"
+    );
     let text = format!(
         r#"(
     profile: (
@@ -797,21 +800,33 @@ fn string_values_expand_environment_variables_in_every_section() {
     );
     let exp = load_text(&text, &[]).unwrap();
     let env = exp.require_env().unwrap();
-    assert_eq!(env.params.get("layout"), Some(&Value::Str("/fallback/switch.txt".into())));
-    assert_eq!(env.profile_switches["layout"], Value::Str("/fallback/switch.txt".into()));
+    assert_eq!(
+        env.params.get("layout"),
+        Some(&Value::Str("/fallback/switch.txt".into()))
+    );
+    assert_eq!(
+        env.profile_switches["layout"],
+        Value::Str("/fallback/switch.txt".into())
+    );
     let profile = exp.profile.as_ref().unwrap();
     assert_eq!(
         profile.generalization["test"][0].params["layout"],
         Value::Str(format!("{manifest}/g.txt"))
     );
     let own = exp.generalization.tasks.as_ref().unwrap();
-    assert_eq!(own[0].params["layout"], Value::Str(format!("${{literal}}/{manifest}")));
+    assert_eq!(
+        own[0].params["layout"],
+        Value::Str(format!("${{literal}}/{manifest}"))
+    );
     assert_eq!(exp.output.dir, PathBuf::from("out/results"));
 
     // `--set` values expand too, and every string, not only paths.
     let exp = load_text(
         &text,
-        &["env.layout=${CARGO_MANIFEST_DIR}/set.txt", &format!("name=run_${{{UNSET_VAR}:-x}}")],
+        &[
+            "env.layout=${CARGO_MANIFEST_DIR}/set.txt",
+            &format!("name=run_${{{UNSET_VAR}:-x}}"),
+        ],
     )
     .unwrap();
     assert_eq!(
@@ -824,11 +839,20 @@ fn string_values_expand_environment_variables_in_every_section() {
     // whatever the environment is later.
     let exp = load_text(&text, &[]).unwrap();
     let operative = exp.to_ron_string();
-    assert!(!operative.contains("CARGO_MANIFEST_DIR") && !operative.contains(UNSET_VAR), "{operative}");
+    assert!(
+        !operative.contains("CARGO_MANIFEST_DIR") && !operative.contains(UNSET_VAR),
+        "{operative}"
+    );
     assert!(operative.contains("/fallback/switch.txt"), "{operative}");
     // A literal `${` in a value is written escaped, so it stays literal when loaded again.
     assert!(operative.contains("$${literal}"), "{operative}");
-    let again = load_str(&operative, Path::new("operative_config.ron"), &[], &registry()).unwrap();
+    let again = load_str(
+        &operative,
+        Path::new("operative_config.ron"),
+        &[],
+        &registry(),
+    )
+    .unwrap();
     assert_eq!(again, exp);
 }
 
@@ -849,14 +873,25 @@ fn an_unset_variable_without_a_default_names_the_variable_key_and_place() {
         r#"(env: (id: "Dummy-v0"))"#,
         &[&format!("env.layout=${{{UNSET_VAR}}}/x")],
     );
-    assert!(err.starts_with(&format!("--set env.layout=${{{UNSET_VAR}}}/x: `env.layout`: environment variable `{UNSET_VAR}`")), "{err}");
+    assert!(
+        err.starts_with(&format!(
+            "--set env.layout=${{{UNSET_VAR}}}/x: `env.layout`: environment variable `{UNSET_VAR}`"
+        )),
+        "{err}"
+    );
     let err = err_text(
         &format!(r#"(profile: (name: "p", env: {{"test": (layout: "${{{UNSET_VAR}}}")}}))"#),
         &[],
     );
-    assert!(err.contains("`profile.env.test.layout`") && err.contains(UNSET_VAR), "{err}");
+    assert!(
+        err.contains("`profile.env.test.layout`") && err.contains(UNSET_VAR),
+        "{err}"
+    );
     let err = err_text(r#"(env: (id: "Dummy-v0", layout: "${oops"))"#, &[]);
-    assert!(err.contains("`env.layout`") && err.contains("without a closing"), "{err}");
+    assert!(
+        err.contains("`env.layout`") && err.contains("without a closing"),
+        "{err}"
+    );
 }
 
 #[test]
