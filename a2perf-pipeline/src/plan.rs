@@ -807,7 +807,10 @@ pub fn load_plans(
                     exp.name,
                     entry.config
                 );
-                let source = dataset_source(&exp, step, &sources, registry)
+                // The task as planned (profile switches and defaults resolved), to compare with
+                // the sources'.
+                let task = plan_of(&exp)?.task;
+                let source = dataset_source(&exp, &task, step, &sources, registry)
                     .map_err(|e| PipelineError::Invalid(format!("{context}: {e}")))?;
                 set_dataset(&mut exp, &source.samples, registry)
                     .map_err(|e| PipelineError::Invalid(format!("{context}: {e}")))?;
@@ -844,6 +847,7 @@ pub fn load_plans(
 /// already planned): the runs to collect from and where the dataset will be.
 fn dataset_source(
     exp: &a2perf_core::Experiment,
+    task_of_exp: &TaskSpec,
     step: &DatasetStep,
     sources: &[ExperimentPlan],
     registry: &a2perf_core::Registry,
@@ -879,13 +883,10 @@ fn dataset_source(
             from[0].name, task.name, other.name, other.task.name
         )));
     }
-    let env = exp
-        .require_env()
-        .map_err(|e| PipelineError::Invalid(e.to_string()))?;
-    if env.id != task.env_id {
+    if task_of_exp.env_id != task.env_id || task_of_exp.env_params != task.env_params {
         return Err(PipelineError::Invalid(format!(
-            "its environment `{}` is not the one of `{}` (`{}`), whose runs make the dataset",
-            env.id, from[0].name, task.env_id
+            "its task `{}` is not the task of `{}` (`{}`), whose runs make the dataset",
+            task_of_exp.name, from[0].name, task.name
         )));
     }
     let algo = exp

@@ -41,7 +41,7 @@ impl Default for RunOptions {
 /// What [`run_experiments`] has just done, for a front end to print.
 #[derive(Debug)]
 pub enum RunEvent<'a> {
-    /// A phase starts (`train`, `infer`, `generalize`, `report`).
+    /// A phase starts (`train`, `collect`, `infer`, `generalize`, `report`).
     Phase(&'static str),
     /// Training of every run finished (or was skipped because complete).
     Trained(&'a TrainSummary),
@@ -140,14 +140,50 @@ pub fn collect_dataset(
     Ok(())
 }
 
+/// Trains every run of `plans`, an experiment whose dataset the suite collects from other
+/// experiments ([`ExperimentPlan::dataset_from`]) in a second stage: first every other run is
+/// trained, then the datasets are collected ([`collect_dataset`]), then those experiments are
+/// trained. Reports each stage through `on_event` (`Trained`, and `Phase("collect")` /
+/// `Phase("train")` between the stages); stops with an error when a run failed or `opts.cancel`
+/// fired.
+pub fn train_with_datasets(
+    registry: &Registry,
+    plans: &[ExperimentPlan],
+    opts: &TrainOptions,
+    on_event: &mut dyn FnMut(RunEvent<'_>),
+) -> Result<()> {
+    let (direct, dependent): (Vec<ExperimentPlan>, Vec<ExperimentPlan>) = plans
+        .iter()
+        .cloned()
+        .partition(|p| p.dataset_from.is_none());
+    let summary = crate::train(registry, &crate::grid(&direct, None), opts)?;
+    on_event(RunEvent::Trained(&summary));
+    check_trained(&summary, &opts.cancel)?;
+    if dependent.is_empty() {
+        return Ok(());
+    }
+    on_event(RunEvent::Phase("collect"));
+    let mut ready = Vec::with_capacity(dependent.len());
+    for mut plan in dependent {
+        if opts.cancel.is_cancelled() {
+            return Err(PipelineError::Cancelled);
+        }
+        collect_dataset(registry, &mut plan, opts.show_progress)?;
+        ready.push(plan);
+    }
+    on_event(RunEvent::Phase("train"));
+    let summary = crate::train(registry, &crate::grid(&ready, None), opts)?;
+    on_event(RunEvent::Trained(&summary));
+    check_trained(&summary, &opts.cancel)
+}
+
 /// Trains every run of `plans`, then infers and generalizes each (skipping runs whose
 /// `inference.json` / `generalization.json` already exist: a retrained run starts from an empty
 /// directory, so its old results cannot linger), then writes the report. Returns the report
 /// directory.
 ///
-/// An experiment whose dataset comes from other experiments of the suite
-/// ([`ExperimentPlan::dataset_from`]) is trained after them: first every other run is trained,
-/// then the datasets are collected ([`collect_dataset`]), then those experiments are trained.
+/// Training is [`train_with_datasets`]: an experiment whose dataset comes from other experiments
+/// of the suite is trained after them.
 pub fn run_experiments(
     registry: &Registry,
     plans: &[ExperimentPlan],
@@ -165,30 +201,7 @@ pub fn run_experiments(
         meters: opts.meters.clone(),
         show_progress: opts.show_progress,
     };
-    // Experiments whose dataset the suite collects from other experiments train in a second
-    // stage, once those runs are trained and the dataset is collected.
-    let (direct, dependent): (Vec<ExperimentPlan>, Vec<ExperimentPlan>) = plans
-        .iter()
-        .cloned()
-        .partition(|p| p.dataset_from.is_none());
-    let summary = crate::train(registry, &crate::grid(&direct, None), &train_opts)?;
-    on_event(RunEvent::Trained(&summary));
-    check_trained(&summary, cancel)?;
-    if !dependent.is_empty() {
-        on_event(RunEvent::Phase("collect"));
-        let mut ready = Vec::with_capacity(dependent.len());
-        for mut plan in dependent {
-            if cancel.is_cancelled() {
-                return Err(PipelineError::Cancelled);
-            }
-            collect_dataset(registry, &mut plan, opts.show_progress)?;
-            ready.push(plan);
-        }
-        on_event(RunEvent::Phase("train"));
-        let summary = crate::train(registry, &crate::grid(&ready, None), &train_opts)?;
-        on_event(RunEvent::Trained(&summary));
-        check_trained(&summary, cancel)?;
-    }
+    train_with_datasets(registry, plans, &train_opts, on_event)?;
 
     let mut experiments: Vec<PathBuf> = plans.iter().map(ExperimentPlan::experiment_dir).collect();
     experiments.dedup();

@@ -210,6 +210,22 @@ fn dataset_step_errors_name_the_suite_the_experiment_and_the_problem() {
             && err.contains("a dataset is collected from one task"),
         "{err}"
     );
+    // An offline experiment on another task than its sources.
+    let tmp = tempfile::tempdir().unwrap();
+    let file = suite(tmp.path(), STEP);
+    write(
+        tmp.path(),
+        "offline.ron",
+        r#"(include: ["online.ron"], name: "offline", algorithm: (name: "toy_bc"),
+            env: (id: "Corridor-v0", length: 5))"#,
+    );
+    let err = load_plans(std::slice::from_ref(&file), &[], None, &reg)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("experiment `offline` (offline.ron)") && err.contains("not the task of `a`"),
+        "{err}"
+    );
     // An algorithm without a `dataset` parameter cannot take one.
     let tmp = tempfile::tempdir().unwrap();
     let file = suite(tmp.path(), STEP);
