@@ -609,6 +609,15 @@ pub struct SuiteEntry {
 /// (config: "bc.ron", dataset: (from: ["toy_ppo", "toy_ddqn"], level: "intermediate",
 ///                              eval_episodes: 10, episodes: 20))
 /// ```
+///
+/// ```
+/// use a2perf_pipeline::plan::DatasetStep;
+/// let step: DatasetStep = ron::from_str(r#"(from: ["toy_ppo"], level: "expert")"#).unwrap();
+/// assert_eq!(step.level().unwrap().name(), "expert");
+/// assert_eq!(step.collect_options().unwrap().dataset_episodes, 100);
+/// let bad: DatasetStep = ron::from_str(r#"(from: ["toy_ppo"], level: "guru")"#).unwrap();
+/// assert!(bad.level().unwrap_err().to_string().contains("dataset.level `guru`"));
+/// ```
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DatasetStep {
