@@ -351,8 +351,35 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
     for row in &rows {
         let cell = row.reproduce.as_str();
         let lower = cell.to_lowercase();
-        // Faithful rows (`default; …`), rows without a switch (`none`, `—`).
-        if lower.starts_with("default") || lower.starts_with("none") || cell.starts_with('—') {
+        let domain_envs: Vec<_> = registry.envs().filter(|e| e.domain == row.domain).collect();
+        // Faithful rows (`default; `x = v` gives our earlier behaviour`): the profile pins the
+        // default.
+        if lower.starts_with("default") {
+            for (param, value) in switches_in(cell) {
+                for entry in domain_envs
+                    .iter()
+                    .filter(|e| e.params.iter().any(|p| p.name == param))
+                {
+                    let spec = entry.params.iter().find(|p| p.name == param).unwrap();
+                    assert_ne!(
+                        spec.kind.check(&Value::parse_literal(&value)),
+                        Ok(spec.default.clone())
+                    );
+                    assert_eq!(
+                        profile.switches_for(entry).get(&param),
+                        Some(&spec.default),
+                        "README row `{}`: the profile does not pin `{param}` at its faithful \
+                         default for {}",
+                        row.what,
+                        entry.id
+                    );
+                }
+                checked += 1;
+            }
+            continue;
+        }
+        // Rows without a switch (`none`, `—`).
+        if lower.starts_with("none") || cell.starts_with('—') {
             continue;
         }
         if lower.contains("generalization suite is configurable")
@@ -365,7 +392,6 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
             assert_eq!(names, paper_generalization(row.domain), "{}", row.what);
             checked += 1;
         }
-        let domain_envs: Vec<_> = registry.envs().filter(|e| e.domain == row.domain).collect();
         for (param, value) in switches_in(cell) {
             if NOT_IN_PROFILE.contains(&(row.domain, param.as_str())) {
                 assert!(
@@ -422,8 +448,9 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
         }
     }
     // The switches known today (a lower bound: the table may grow, and must keep the profile in
-    // step): circuit 4 + netlist, locomotion 1 + motion, web 6 + designs, and the suites.
-    assert!(checked >= 17, "only {checked} switches checked");
+    // step): circuit 4 + netlist + 2 pinned defaults, locomotion 1 + motion, web 6 + designs, and
+    // the suites.
+    assert!(checked >= 19, "only {checked} switches checked");
     for (domain, param) in NOT_IN_PROFILE {
         assert!(
             exceptions_seen.iter().any(|p| p == param),
