@@ -3,7 +3,7 @@
 //! | observation | network | paper's network |
 //! |---|---|---|
 //! | anything (fallback) | all tensors flattened → MLP (`hidden_sizes`, ReLU) for logits or mean, a separate MLP for the value | QL actor/value `fc_layer_params=(512, 256)` |
-//! | circuit (`features`, `grid` `[C, rows, cols]`, `Discrete(rows·cols)`) | MLP over `features` → global embedding *g*; per-cell hidden layer `relu(W_c·[cell channels, cell position] + W_g·g)` → one score per cell (a 1×1 convolution conditioned on *g*, plus the cell's position `x, y, |x|, |y|` in [−1, 1]); value MLP on *g* (32-8-1) | GCN encoder over the netlist graph, deconvolution head 8×8×32 → 128×128, value head 32-8-1. We have no graph tensor in the contract, so the summary features stand in for the GCN embedding; the per-cell head replaces the deconvolution because our grid is the env's own (no 128×128 padding). |
+//! | circuit (`features`, `grid` `[C, rows, cols]`, `Discrete(rows·cols)`) | MLP over `features` → global embedding *g*; per-cell hidden layer `relu(W_c·[cell channels, cell position] + W_g·g)` → one score per cell (a 1×1 convolution conditioned on *g*, plus the cell's position `x, y, |x|, |y|` in [−1, 1]); value MLP on *g* (32-8-1) | GCN encoder over the netlist graph, deconvolution head 8×8×32 → 128×128, value head 32-8-1. We have no graph tensor in the contract, so the summary features stand in for the GCN embedding; the per-cell head replaces the deconvolution because our grid is the env's own. With A2Perf's padded action space (`padded_action`, metadata `action_layout = "padded128"`: `Discrete(128·128)`, the grid centred on the canvas) the same scores are placed at the padded actions of their cells and the padding gets `−∞`, so the network, its parameters and its choices are those of the unpadded layout. |
 //! | web (`profile_*`, `dom_*`, `Discrete(E·F·2)`) | token embeddings (`embedding_dim`, paper 100) mean-pooled per attribute; element MLP over the 5 pooled attributes + 8 DOM features → `latent_dim` (paper 50); field MLP over pooled key + value → `latent_dim`; logit(e, f, k) = ⟨field_f, element_e⟩ + type_k(element_e) + type_k(field_f); value MLP on the mean element and mean field embeddings | sonnet `WebLSTMEncoder`: same embedding/latent sizes and the same dot-product + action-type logits; an LSTM runs over the DOM sequence. We drop the LSTM (elements are scored independently plus their 8 geometry/state features), which keeps inference allocation-free and fast. |
 
 use a2perf_core::{EnvSpec, PolicyError, RngStream, Space};
@@ -55,6 +55,10 @@ pub struct CircuitArch {
     /// checkpoints written before they existed, which then run as before).
     #[serde(default)]
     position_inputs: usize,
+    /// Side of the padded square canvas the actions are laid out on ([`PADDED_CANVAS`] for
+    /// A2Perf's `padded128` layout), or 0 when an action is a grid cell.
+    #[serde(default)]
+    padded_side: usize,
     global: Mlp,
     global_to_cell: Linear,
     cell_in: Linear,
@@ -162,9 +166,10 @@ impl DiscreteNet {
             web_arch(spec, layout, opts, n, with_value, &mut alloc),
         ) {
             a
-        } else if let (true, Some(a)) =
-            (auto, circuit_arch(layout, opts, n, with_value, &mut alloc))
-        {
+        } else if let (true, Some(a)) = (
+            auto,
+            circuit_arch(spec, layout, opts, n, with_value, &mut alloc),
+        ) {
             a
         } else {
             alloc = ParamAlloc::new();
@@ -318,7 +323,7 @@ impl CircuitArch {
     /// `features` width and the grid's channel count, and it scores any number of cells, so a
     /// placement policy can run on circuits it was not trained on (the generalization tasks).
     /// Fails, saying why, when the new layout differs in anything the parameters depend on.
-    pub(crate) fn retarget(&mut self, new: &ObsLayout) -> Result<(), String> {
+    pub(crate) fn retarget(&mut self, spec: &EnvSpec, new: &ObsLayout) -> Result<(), String> {
         let features = new
             .index("features")
             .ok_or("the environment has no `features` tensor")?;
@@ -340,21 +345,53 @@ impl CircuitArch {
                 self.channels
             ));
         }
-        if new.num_actions != Some(cells) {
-            return Err(format!(
-                "the action space has {:?} actions but the grid {cells} cells",
-                new.num_actions
-            ));
-        }
+        let padded_side = action_canvas(spec, shape[1], shape[2], new.num_actions.unwrap_or(0))
+            .ok_or_else(|| {
+                format!(
+                    "the action space has {:?} actions, neither the grid's {cells} cells nor a \
+                     padded {PADDED_CANVAS}×{PADDED_CANVAS} canvas holding the {}×{} grid",
+                    new.num_actions, shape[2], shape[1]
+                )
+            })?;
         self.features = features;
         self.grid = grid;
         self.cells = cells;
         self.shape = (shape[1], shape[2]);
+        self.padded_side = padded_side;
         Ok(())
     }
 }
 
+/// Side of A2Perf's padded action canvas (`max_grid_size`): its `padded128` action layout has
+/// 128·128 actions whatever the netlist's grid.
+pub const PADDED_CANVAS: usize = 128;
+
+/// How `n` actions map onto a `rows × cols` grid: `Some(0)` when an action is a grid cell,
+/// `Some(PADDED_CANVAS)` for A2Perf's padded layout (declared by the environment's metadata
+/// `action_layout = "padded128"`), `None` when neither fits.
+fn action_canvas(spec: &EnvSpec, rows: usize, cols: usize, n: usize) -> Option<usize> {
+    let padded = spec.metadata.get("action_layout").map(String::as_str) == Some("padded128");
+    if padded {
+        (n == PADDED_CANVAS * PADDED_CANVAS && rows <= PADDED_CANVAS && cols <= PADDED_CANVAS)
+            .then_some(PADDED_CANVAS)
+    } else {
+        (n == rows * cols && n > 0).then_some(0)
+    }
+}
+
+/// The padded action of grid cell `cell`: the grid centred on a `side × side` canvas with
+/// `(side − rows)/2` rows above it and `(side − cols)/2` columns left of it, row-major. This is
+/// A2Perf's `translate_to_padded_canvas`, as `a2perf_circuit::env::cell_to_padded_action` (the
+/// baselines do not depend on the circuit crate; `tests/circuit_padded.rs` checks that the two
+/// agree). The map keeps the cells' order, so masked argmax, inverse-CDF sampling and ε-greedy
+/// draws pick the same cell under either layout.
+fn padded_action(cell: usize, rows: usize, cols: usize, side: usize) -> usize {
+    let (up, left) = ((side - rows) / 2, (side - cols) / 2);
+    (cell / cols + up) * side + cell % cols + left
+}
+
 fn circuit_arch(
+    spec: &EnvSpec,
     layout: &ObsLayout,
     opts: &NetOptions,
     n: usize,
@@ -364,9 +401,11 @@ fn circuit_arch(
     let features = layout.index("features")?;
     let grid = layout.index("grid")?;
     let shape = &layout.tensors[grid].1;
-    if shape.len() != 3 || shape[1] * shape[2] != n || n == 0 {
+    if shape.len() != 3 {
         return None;
     }
+    let padded_side = action_canvas(spec, shape[1], shape[2], n)?;
+    let cells = shape[1] * shape[2];
     let channels = shape[0];
     let d = layout.dim(features);
     let mut sizes = vec![d];
@@ -383,9 +422,10 @@ fn circuit_arch(
         features_dim: d,
         grid,
         channels,
-        cells: n,
+        cells,
         shape: (shape[1], shape[2]),
         position_inputs: CELL_POSITION_INPUTS,
+        padded_side,
         global,
         global_to_cell,
         cell_in,
@@ -408,7 +448,7 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
     let g = c
         .global
         .forward(params, batch.tensor(c.features), b, &mut ws.a);
-    let [gc, cx, h, ..] = &mut ws.v;
+    let [gc, cx, h, _, _, _, _, scores, ..] = &mut ws.v;
     ensure(gc, b * k);
     c.global_to_cell.forward(params, g, b, gc);
     ensure(cx, b * nc * stride);
@@ -443,7 +483,21 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
             }
         }
     }
-    c.score.forward(params, h, b * nc, &mut ws.logits);
+    if c.padded_side == 0 {
+        c.score.forward(params, h, b * nc, &mut ws.logits);
+    } else {
+        // Score the cells, then lay them out on the padded canvas; the padding is never legal.
+        ensure(scores, b * nc);
+        c.score.forward(params, h, b * nc, scores);
+        let n = c.padded_side * c.padded_side;
+        for r in 0..b {
+            let row = &mut ws.logits[r * n..(r + 1) * n];
+            row.fill(f32::NEG_INFINITY);
+            for (i, &z) in scores[r * nc..(r + 1) * nc].iter().enumerate() {
+                row[padded_action(i, rows, cols, c.padded_side)] = z;
+            }
+        }
+    }
     if let Some(v) = &c.value {
         let y = v.forward(params, c.global.output(&ws.a), b, &mut ws.c);
         ws.values[..b].copy_from_slice(y);
@@ -462,7 +516,21 @@ fn circuit_backward(
     let b = ws.batch;
     let (nc, k) = (c.cells, c.cell_in.out);
     let h_dim = c.global.out();
-    let [_gc, cx, h, dh, dgc, dg, dg2, ..] = &mut ws.v;
+    let [_gc, cx, h, dh, dgc, dg, dg2, dscores, ..] = &mut ws.v;
+    let dlogits = if c.padded_side == 0 {
+        dlogits
+    } else {
+        // Only the cells' entries depend on the parameters.
+        let (rows, cols) = c.shape;
+        let n = c.padded_side * c.padded_side;
+        ensure(dscores, b * nc);
+        for r in 0..b {
+            for i in 0..nc {
+                dscores[r * nc + i] = dlogits[r * n + padded_action(i, rows, cols, c.padded_side)];
+            }
+        }
+        &dscores[..b * nc]
+    };
     ensure(dh, b * nc * k);
     c.score
         .backward(params, grads, h, dlogits, b * nc, Some(dh));

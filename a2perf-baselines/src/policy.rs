@@ -351,7 +351,7 @@ impl NetPolicy {
                     n,
                     ..
                 } => {
-                    c.retarget(&layout).map_err(|why| {
+                    c.retarget(spec, &layout).map_err(|why| {
                         bad(format!(
                             "checkpoint's circuit network cannot run on environment `{}`: {why}",
                             spec.id

@@ -283,6 +283,36 @@ pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
     let loaded = load(registry, &args.configs, &args.set, args.seeds.as_deref())?;
     let shard = args.shard.as_deref().map(str::parse).transpose()?;
     let cancel = cancel_on_signals(args.preempt_grace)?;
+    if let Some(plan) = loaded.plans.iter().find(|p| p.dataset_from.is_some()) {
+        // A suite's dataset step needs its source runs trained first, which one shard of a
+        // sweep cannot know.
+        if shard.is_some() {
+            anyhow::bail!(
+                "experiment `{}` trains on a dataset its suite collects from other experiments \
+                 (its entry's `dataset` step), which needs them trained first: train the suite \
+                 without --shard, or shard a suite without dataset steps and run `a2perf \
+                 collect` between the two",
+                plan.name
+            );
+        }
+        let opts = TrainOptions {
+            jobs: args.jobs,
+            cancel,
+            meters: pipeline::meters::system_meters(),
+            show_progress: !args.quiet,
+        };
+        pipeline::run::train_with_datasets(
+            registry,
+            &loaded.plans,
+            &opts,
+            &mut |event| match event {
+                pipeline::RunEvent::Phase(name) => eprintln!("== {name}"),
+                pipeline::RunEvent::Trained(summary) => print_train_summary(summary),
+                _ => {}
+            },
+        )?;
+        return Ok(());
+    }
     train_plans(
         registry,
         &loaded.plans,

@@ -56,3 +56,31 @@ fn a_cause_is_printed_once() {
     );
     assert!(err.contains("num_websites"), "{err}");
 }
+
+#[test]
+fn a_suite_with_dataset_steps_cannot_be_trained_by_shards() {
+    // BC's dataset is collected from runs of other shards: one shard cannot wait for them.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_a2perf"))
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+        .args([
+            "train",
+            "configs/paper/suite.ron",
+            "--shard",
+            "0/2",
+            "--set",
+        ])
+        .arg(format!("output.dir={}", tmp.path().display()))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("experiment `paper_circuit_toy_macro_stdcell_bc`")
+            && err.contains("`dataset` step")
+            && err.contains("without --shard"),
+        "{err}"
+    );
+    // Refused before anything was trained.
+    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0);
+}

@@ -251,7 +251,9 @@ fn wall_at(curve: &LearningCurve, steps: u64) -> Option<f64> {
     pts.last().map(|p| p.wall_seconds)
 }
 
-fn dataset_id(task: &str, env_id: &str, level: Level) -> String {
+/// `<Env>[-<task suffix>]-<level>-v0`: the directory `collect` writes a task's dataset of one
+/// level to.
+pub(crate) fn dataset_id(task: &str, env_id: &str, level: Level) -> String {
     let base = match env_id.rfind("-v") {
         Some(i) if env_id[i + 2..].chars().all(|c| c.is_ascii_digit()) => &env_id[..i],
         _ => env_id,
@@ -280,6 +282,24 @@ pub fn collect(
     runs: &[PathBuf],
     out: &Path,
     opts: &CollectOptions,
+) -> Result<CollectSummary> {
+    collect_levels(
+        registry,
+        runs,
+        out,
+        opts,
+        &[Level::Novice, Level::Intermediate, Level::Expert],
+    )
+}
+
+/// [`collect`], writing only the datasets of `levels` (every checkpoint is still evaluated and
+/// levelled: the levels depend on all of them).
+pub fn collect_levels(
+    registry: &Registry,
+    runs: &[PathBuf],
+    out: &Path,
+    opts: &CollectOptions,
+    levels: &[Level],
 ) -> Result<CollectSummary> {
     if opts.eval_episodes == 0 || opts.dataset_episodes == 0 {
         return Err(PipelineError::Invalid(
@@ -374,7 +394,7 @@ pub fn collect(
             write_json_atomic(&dir.join("evaluation.json"), evals)?;
         }
         let first = &entries[0].0;
-        for level in [Level::Novice, Level::Intermediate, Level::Expert] {
+        for &level in levels {
             let pool: Vec<(&LoadedRun, &CheckpointEval)> = entries
                 .iter()
                 .flat_map(|(r, e)| {

@@ -237,6 +237,10 @@ pub struct ExperimentPlan {
     pub metrics: MetricSettings,
     /// For offline algorithms: where the dataset came from and its sample cost.
     pub dataset: Option<DatasetProvenance>,
+    /// For an offline experiment of a suite whose dataset is collected from other experiments of
+    /// the same suite (a suite entry's `dataset`): what to collect, from which runs, and where.
+    /// [`crate::run_experiments`] collects it after training those runs.
+    pub dataset_from: Option<DatasetSource>,
     /// Writes `operative_config.ron` (absent when the plan was not built from a config file).
     pub operative: Option<OperativeWriter>,
 }
@@ -275,6 +279,7 @@ impl ExperimentPlan {
             generalization: GeneralizationSettings::default(),
             metrics: MetricSettings::default(),
             dataset: None,
+            dataset_from: None,
             operative: None,
         }
     }
@@ -591,6 +596,115 @@ pub struct SuiteEntry {
     /// `dotted.path=value` overrides for this experiment (after the suite's own).
     #[serde(default)]
     pub set: Vec<String>,
+    /// For an offline algorithm (`bc`): the dataset it trains on is collected from other
+    /// experiments of this suite once they are trained (`a2perf run` does it between the two).
+    #[serde(default)]
+    pub dataset: Option<DatasetStep>,
+}
+
+/// A suite entry's `dataset`: an offline dataset collected, as `a2perf collect` does, from the
+/// checkpoints of other experiments of the same suite.
+///
+/// ```ron
+/// (config: "bc.ron", dataset: (from: ["toy_ppo", "toy_ddqn"], level: "intermediate",
+///                              eval_episodes: 10, episodes: 20))
+/// ```
+///
+/// ```
+/// use a2perf_pipeline::plan::DatasetStep;
+/// let step: DatasetStep = ron::from_str(r#"(from: ["toy_ppo"], level: "expert")"#).unwrap();
+/// assert_eq!(step.level().unwrap().name(), "expert");
+/// assert_eq!(step.collect_options().unwrap().dataset_episodes, 100);
+/// let bad: DatasetStep = ron::from_str(r#"(from: ["toy_ppo"], level: "guru")"#).unwrap();
+/// assert!(bad.level().unwrap_err().to_string().contains("dataset.level `guru`"));
+/// ```
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetStep {
+    /// Names of the experiments (their `name`, as loaded) whose runs' checkpoints make the
+    /// dataset; they must run on the same task as each other and as the offline experiment.
+    pub from: Vec<String>,
+    /// Expertise level of the checkpoints drawn: `novice`, `intermediate` or `expert`.
+    #[serde(default = "default_level")]
+    pub level: String,
+    /// Level rule: the paper's one-σ wording instead of the original code's rule.
+    #[serde(default)]
+    pub one_sigma: bool,
+    /// Greedy episodes per checkpoint evaluation (the original: 100).
+    #[serde(default = "default_episodes")]
+    pub eval_episodes: usize,
+    /// Episodes in the dataset.
+    #[serde(default = "default_episodes")]
+    pub episodes: usize,
+    /// Training sample cost rule: `measured` or `pro_rata` (the original's).
+    #[serde(default = "default_cost")]
+    pub cost: String,
+}
+
+fn default_level() -> String {
+    "intermediate".into()
+}
+
+fn default_episodes() -> usize {
+    100
+}
+
+fn default_cost() -> String {
+    "measured".into()
+}
+
+impl DatasetStep {
+    /// The level, checked.
+    pub fn level(&self) -> Result<super::collect::Level> {
+        use super::collect::Level;
+        match self.level.as_str() {
+            "novice" => Ok(Level::Novice),
+            "intermediate" => Ok(Level::Intermediate),
+            "expert" => Ok(Level::Expert),
+            other => Err(PipelineError::Invalid(format!(
+                "dataset.level `{other}`: expected `novice`, `intermediate` or `expert`"
+            ))),
+        }
+    }
+
+    /// The options `collect` runs with.
+    pub fn collect_options(&self) -> Result<super::collect::CollectOptions> {
+        use super::collect::{CollectOptions, CostRule};
+        let cost = match self.cost.as_str() {
+            "measured" => CostRule::Measured,
+            "pro_rata" => CostRule::ProRata,
+            other => {
+                return Err(PipelineError::Invalid(format!(
+                    "dataset.cost `{other}`: expected `measured` or `pro_rata`"
+                )));
+            }
+        };
+        if self.eval_episodes == 0 || self.episodes == 0 {
+            return Err(PipelineError::Invalid(
+                "dataset: `eval_episodes` and `episodes` must be at least 1".into(),
+            ));
+        }
+        Ok(CollectOptions {
+            eval_episodes: self.eval_episodes,
+            dataset_episodes: self.episodes,
+            cost,
+            one_sigma: self.one_sigma,
+            show_progress: false,
+        })
+    }
+}
+
+/// Where an offline experiment's dataset comes from, resolved when the suite is loaded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DatasetSource {
+    /// The suite entry's step.
+    pub step: DatasetStep,
+    /// Run directories of the source experiments (every seed), in suite order.
+    pub runs: Vec<PathBuf>,
+    /// Directory `collect` writes into (`<experiment dir>/datasets`).
+    pub out: PathBuf,
+    /// The dataset's `samples.json`: the experiment's `algorithm.dataset`.
+    pub samples: PathBuf,
 }
 
 /// A suite file: several experiment configs run and reported together (e.g.
@@ -646,10 +760,13 @@ pub fn load_plans(
     registry: &a2perf_core::Registry,
 ) -> Result<LoadedPlans> {
     let mut out = LoadedPlans::default();
-    let load_one = |path: &std::path::Path, overrides: Vec<String>| -> Result<ExperimentPlan> {
-        let exp = a2perf_core::Experiment::load(path, &overrides, registry)
-            .map_err(|e| PipelineError::Invalid(e.to_string()))?;
-        let mut plan = from_experiment(&exp, registry)?;
+    let load_exp =
+        |path: &std::path::Path, overrides: &[String]| -> Result<a2perf_core::Experiment> {
+            a2perf_core::Experiment::load(path, overrides, registry)
+                .map_err(|e| PipelineError::Invalid(e.to_string()))
+        };
+    let plan_of = |exp: &a2perf_core::Experiment| -> Result<ExperimentPlan> {
+        let mut plan = from_experiment(exp, registry)?;
         if let Some(seeds) = seeds {
             plan.seeds = seeds.to_vec();
         }
@@ -658,23 +775,59 @@ pub fn load_plans(
     for path in paths {
         let text = std::fs::read_to_string(path).map_err(super::io_err(path))?;
         if looks_like_suite(&text) {
-            let suite: Suite = ron::from_str(&text).map_err(|e| {
-                PipelineError::Invalid(format!(
-                    "{}:{}:{}: {}",
-                    path.display(),
-                    e.span.start.line,
-                    e.span.start.col,
-                    e.code
-                ))
-            })?;
+            let suite: Suite = ron::Options::default()
+                .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
+                .from_str(&text)
+                .map_err(|e| {
+                    PipelineError::Invalid(format!(
+                        "{}:{}:{}: {}",
+                        path.display(),
+                        e.span.start.line,
+                        e.span.start.col,
+                        e.code
+                    ))
+                })?;
             let base = path.parent().unwrap_or(std::path::Path::new("."));
-            for entry in &suite.experiments {
+            let overrides_of = |entry: &SuiteEntry| {
                 let mut overrides = suite.set.clone();
                 overrides.extend(entry.set.iter().cloned());
                 overrides.extend(sets.iter().cloned());
-                out.plans
-                    .push(load_one(&base.join(&entry.config), overrides)?);
+                overrides
+            };
+            // Experiments that train from a dataset of the suite are planned after the others,
+            // whose runs they draw from; the plans keep the file's order.
+            let mut planned: Vec<Option<ExperimentPlan>> = vec![None; suite.experiments.len()];
+            for (i, entry) in suite.experiments.iter().enumerate() {
+                if entry.dataset.is_none() {
+                    let exp = load_exp(&base.join(&entry.config), &overrides_of(entry))?;
+                    planned[i] = Some(plan_of(&exp)?);
+                }
             }
+            let sources: Vec<ExperimentPlan> = planned.iter().flatten().cloned().collect();
+            for (i, entry) in suite.experiments.iter().enumerate() {
+                let Some(step) = &entry.dataset else {
+                    continue;
+                };
+                let config = base.join(&entry.config);
+                let mut exp = load_exp(&config, &overrides_of(entry))?;
+                let context = format!(
+                    "{}: experiment `{}` ({})",
+                    path.display(),
+                    exp.name,
+                    entry.config
+                );
+                // The task as planned (profile switches and defaults resolved), to compare with
+                // the sources'.
+                let task = plan_of(&exp)?.task;
+                let source = dataset_source(&exp, &task, step, &sources, registry)
+                    .map_err(|e| PipelineError::Invalid(format!("{context}: {e}")))?;
+                set_dataset(&mut exp, &source.samples, registry)
+                    .map_err(|e| PipelineError::Invalid(format!("{context}: {e}")))?;
+                let mut plan = plan_of(&exp)?;
+                plan.dataset_from = Some(source);
+                planned[i] = Some(plan);
+            }
+            out.plans.extend(planned.into_iter().flatten());
             if out.report_dir.is_none() && !suite.report_dir.is_empty() {
                 out.report_dir = Some(PathBuf::from(&suite.report_dir));
             }
@@ -682,7 +835,7 @@ pub fn load_plans(
                 out.suite_name = Some(suite.name.clone());
             }
         } else {
-            out.plans.push(load_one(path, sets.to_vec())?);
+            out.plans.push(plan_of(&load_exp(path, sets)?)?);
         }
     }
     let mut dirs = std::collections::BTreeSet::new();
@@ -697,6 +850,106 @@ pub fn load_plans(
         }
     }
     Ok(out)
+}
+
+/// Resolves a suite entry's dataset step against the suite's other experiments (`sources`,
+/// already planned): the runs to collect from and where the dataset will be.
+fn dataset_source(
+    exp: &a2perf_core::Experiment,
+    task_of_exp: &TaskSpec,
+    step: &DatasetStep,
+    sources: &[ExperimentPlan],
+    registry: &a2perf_core::Registry,
+) -> Result<DatasetSource> {
+    let level = step.level()?;
+    step.collect_options()?;
+    if step.from.is_empty() {
+        return Err(PipelineError::Invalid(
+            "dataset.from names no experiment to collect from".into(),
+        ));
+    }
+    let mut from: Vec<&ExperimentPlan> = Vec::new();
+    for name in &step.from {
+        let Some(plan) = sources.iter().find(|p| &p.name == name) else {
+            let names = sources.iter().map(|p| p.name.as_str());
+            let hint = a2perf_core::value::did_you_mean(name, names.clone())
+                .map(|h| format!(" (did you mean `{h}`?)"))
+                .unwrap_or_default();
+            let known: Vec<String> = names.map(|n| format!("`{n}`")).collect();
+            return Err(PipelineError::Invalid(format!(
+                "dataset.from: no experiment named `{name}` in this suite{hint} (experiments that \
+                 do not themselves take a dataset: {})",
+                known.join(", ")
+            )));
+        };
+        from.push(plan);
+    }
+    let task = &from[0].task;
+    if let Some(other) = from.iter().find(|p| p.task.name != task.name) {
+        return Err(PipelineError::Invalid(format!(
+            "dataset.from: `{}` runs task `{}` but `{}` runs `{}`; a dataset is collected from \
+             one task",
+            from[0].name, task.name, other.name, other.task.name
+        )));
+    }
+    if task_of_exp.env_id != task.env_id || task_of_exp.env_params != task.env_params {
+        return Err(PipelineError::Invalid(format!(
+            "its task `{}` is not the task of `{}` (`{}`), whose runs make the dataset",
+            task_of_exp.name, from[0].name, task.name
+        )));
+    }
+    let algo = exp
+        .require_algorithm()
+        .map_err(|e| PipelineError::Invalid(e.to_string()))?;
+    if !registry
+        .algorithm(&algo.name)?
+        .params
+        .iter()
+        .any(|p| p.name == "dataset")
+    {
+        return Err(PipelineError::Invalid(format!(
+            "algorithm `{}` has no `dataset` parameter to train on a collected dataset",
+            algo.name
+        )));
+    }
+    let out = exp.output.dir.join(&exp.name).join("datasets");
+    let samples = out
+        .join(super::collect::dataset_id(&task.name, &task.env_id, level))
+        .join("samples.json");
+    Ok(DatasetSource {
+        step: step.clone(),
+        runs: from
+            .iter()
+            .flat_map(|p| p.seeds.iter().map(|s| p.run_dir(*s)))
+            .collect(),
+        out,
+        samples,
+    })
+}
+
+/// Points the experiment's `algorithm.dataset` at `samples`, so its operative config and
+/// `run.json` name the dataset it trains on.
+fn set_dataset(
+    exp: &mut a2perf_core::Experiment,
+    samples: &std::path::Path,
+    registry: &a2perf_core::Registry,
+) -> Result<()> {
+    let Some(algo) = exp.algorithm.as_mut() else {
+        return Err(PipelineError::Invalid("no algorithm".into()));
+    };
+    let mut given = algo.params.values().clone();
+    given.insert(
+        "dataset".into(),
+        Value::Str(samples.to_string_lossy().into_owned()),
+    );
+    let specs = &registry.algorithm(&algo.name)?.params;
+    algo.params = a2perf_core::Params::resolve(specs, &given).map_err(|source| {
+        a2perf_core::RegistryError::Param {
+            context: format!("algorithm {}", algo.name),
+            source,
+        }
+    })?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -41,7 +41,7 @@ impl Default for RunOptions {
 /// What [`run_experiments`] has just done, for a front end to print.
 #[derive(Debug)]
 pub enum RunEvent<'a> {
-    /// A phase starts (`train`, `infer`, `generalize`, `report`).
+    /// A phase starts (`train`, `collect`, `infer`, `generalize`, `report`).
     Phase(&'static str),
     /// Training of every run finished (or was skipped because complete).
     Trained(&'a TrainSummary),
@@ -100,10 +100,90 @@ pub fn check_trained(summary: &TrainSummary, cancel: &CancelToken) -> Result<()>
     Ok(())
 }
 
+/// Collects the dataset of an experiment whose suite entry names one (`plan.dataset_from`), from
+/// the (trained) runs of its source experiments, and records its provenance in the plan. Nothing
+/// is collected when every run of the experiment is complete (the training phase skips them) and
+/// the dataset exists; otherwise it is collected again — deterministically, so an interrupted
+/// run resumes on the same data.
+pub fn collect_dataset(
+    registry: &Registry,
+    plan: &mut ExperimentPlan,
+    show_progress: bool,
+) -> Result<()> {
+    let Some(source) = plan.dataset_from.clone() else {
+        return Ok(());
+    };
+    let samples = source.samples.to_string_lossy().into_owned();
+    let complete = plan.seeds.iter().all(|s| {
+        a2perf_core::RunDir::new(plan.run_dir(*s))
+            .is_complete()
+            .unwrap_or(false)
+    });
+    if !(complete && source.samples.is_file()) {
+        let level = source.step.level()?;
+        let mut opts = source.step.collect_options()?;
+        opts.show_progress = show_progress;
+        let summary =
+            crate::collect::collect_levels(registry, &source.runs, &source.out, &opts, &[level])?;
+        if !summary.datasets.iter().any(|d| d.level == level) {
+            return Err(PipelineError::Invalid(format!(
+                "experiment `{}`: no checkpoint of {} reached the `{}` level, so there is no \
+                 dataset to train on (give its suite entry another `level`, or `one_sigma: true`)",
+                plan.name,
+                source.step.from.join(", "),
+                level.name()
+            )));
+        }
+    }
+    plan.dataset = crate::collect::dataset_info_for(&source.samples)?
+        .map(|info| crate::DatasetProvenance::from_info(&info, &samples));
+    Ok(())
+}
+
+/// Trains every run of `plans`, an experiment whose dataset the suite collects from other
+/// experiments ([`ExperimentPlan::dataset_from`]) in a second stage: first every other run is
+/// trained, then the datasets are collected ([`collect_dataset`]), then those experiments are
+/// trained. Reports each stage through `on_event` (`Trained`, and `Phase("collect")` /
+/// `Phase("train")` between the stages); stops with an error when a run failed or `opts.cancel`
+/// fired.
+pub fn train_with_datasets(
+    registry: &Registry,
+    plans: &[ExperimentPlan],
+    opts: &TrainOptions,
+    on_event: &mut dyn FnMut(RunEvent<'_>),
+) -> Result<()> {
+    let (direct, dependent): (Vec<ExperimentPlan>, Vec<ExperimentPlan>) = plans
+        .iter()
+        .cloned()
+        .partition(|p| p.dataset_from.is_none());
+    let summary = crate::train(registry, &crate::grid(&direct, None), opts)?;
+    on_event(RunEvent::Trained(&summary));
+    check_trained(&summary, &opts.cancel)?;
+    if dependent.is_empty() {
+        return Ok(());
+    }
+    on_event(RunEvent::Phase("collect"));
+    let mut ready = Vec::with_capacity(dependent.len());
+    for mut plan in dependent {
+        if opts.cancel.is_cancelled() {
+            return Err(PipelineError::Cancelled);
+        }
+        collect_dataset(registry, &mut plan, opts.show_progress)?;
+        ready.push(plan);
+    }
+    on_event(RunEvent::Phase("train"));
+    let summary = crate::train(registry, &crate::grid(&ready, None), opts)?;
+    on_event(RunEvent::Trained(&summary));
+    check_trained(&summary, &opts.cancel)
+}
+
 /// Trains every run of `plans`, then infers and generalizes each (skipping runs whose
 /// `inference.json` / `generalization.json` already exist: a retrained run starts from an empty
 /// directory, so its old results cannot linger), then writes the report. Returns the report
 /// directory.
+///
+/// Training is [`train_with_datasets`]: an experiment whose dataset comes from other experiments
+/// of the suite is trained after them.
 pub fn run_experiments(
     registry: &Registry,
     plans: &[ExperimentPlan],
@@ -121,9 +201,7 @@ pub fn run_experiments(
         meters: opts.meters.clone(),
         show_progress: opts.show_progress,
     };
-    let summary = crate::train(registry, &crate::grid(plans, None), &train_opts)?;
-    on_event(RunEvent::Trained(&summary));
-    check_trained(&summary, cancel)?;
+    train_with_datasets(registry, plans, &train_opts, on_event)?;
 
     let mut experiments: Vec<PathBuf> = plans.iter().map(ExperimentPlan::experiment_dir).collect();
     experiments.dedup();

@@ -548,6 +548,9 @@ impl Experiment {
         default_name: &str,
         registry: &Registry,
     ) -> Result<Self, ConfigError> {
+        let mut expanded = tree.clone();
+        super::expand::expand_tree(&mut expanded)?;
+        let tree = &expanded;
         let fields = as_struct(tree, "(top level)")?;
         let mut by_key: BTreeMap<&str, &Field> = BTreeMap::new();
         for field in fields {
@@ -973,7 +976,8 @@ pub(crate) fn ron_value(v: &Value) -> String {
         Value::Bool(b) => b.to_string(),
         Value::Int(i) => i.to_string(),
         Value::Float(x) => ron_float(*x),
-        Value::Str(s) => ron_string(s),
+        // Strings are expanded when loaded (`${VAR}`), so a literal `${` is written escaped.
+        Value::Str(s) => ron_string(&super::expand::escape(s)),
         Value::List(items) => {
             let inner: Vec<String> = items.iter().map(ron_value).collect();
             format!("[{}]", inner.join(", "))

@@ -53,6 +53,7 @@
 //! ```
 
 mod error;
+mod expand;
 mod experiment;
 mod layers;
 mod profile;

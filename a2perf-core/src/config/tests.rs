@@ -774,6 +774,126 @@ fn a_profile_fills_in_unset_parameters_and_records_its_switches() {
     assert_eq!(env.params.get("difficulty"), Some(&Value::Int(3)));
 }
 
+// An unset variable no test sets: its default is taken; the error names it without one.
+const UNSET_VAR: &str = "A2PERF_CONFIG_TEST_SURELY_UNSET_1";
+
+#[test]
+fn string_values_expand_environment_variables_in_every_section() {
+    // Cargo sets CARGO_MANIFEST_DIR for the test process; reading it avoids `set_var`, which is
+    // unsound while other test threads read the environment.
+    let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap();
+    assert!(
+        std::env::var(UNSET_VAR).is_err(),
+        "{UNSET_VAR} must not be set"
+    );
+    let text = format!(
+        r#"(
+    profile: (
+        name: "p",
+        env: {{"Dummy-v0": (layout: "${{{UNSET_VAR}:-/fallback}}/switch.txt")}},
+        generalization: {{"test": [(env: "Dummy-v0", name: "g", params: (layout: "${{CARGO_MANIFEST_DIR}}/g.txt"))]}},
+    ),
+    env: (id: "Dummy-v0"),
+    generalization: (tasks: [(env: "Dummy-v0", name: "own", params: (layout: "$${{literal}}/${{CARGO_MANIFEST_DIR}}"))]),
+    output: (dir: "${{{UNSET_VAR}:-out}}/results"),
+)"#
+    );
+    let exp = load_text(&text, &[]).unwrap();
+    let env = exp.require_env().unwrap();
+    assert_eq!(
+        env.params.get("layout"),
+        Some(&Value::Str("/fallback/switch.txt".into()))
+    );
+    assert_eq!(
+        env.profile_switches["layout"],
+        Value::Str("/fallback/switch.txt".into())
+    );
+    let profile = exp.profile.as_ref().unwrap();
+    assert_eq!(
+        profile.generalization["test"][0].params["layout"],
+        Value::Str(format!("{manifest}/g.txt"))
+    );
+    let own = exp.generalization.tasks.as_ref().unwrap();
+    assert_eq!(
+        own[0].params["layout"],
+        Value::Str(format!("${{literal}}/{manifest}"))
+    );
+    assert_eq!(exp.output.dir, PathBuf::from("out/results"));
+
+    // `--set` values expand too, and every string, not only paths.
+    let exp = load_text(
+        &text,
+        &[
+            "env.layout=${CARGO_MANIFEST_DIR}/set.txt",
+            &format!("name=run_${{{UNSET_VAR}:-x}}"),
+        ],
+    )
+    .unwrap();
+    assert_eq!(
+        exp.require_env().unwrap().params.get("layout"),
+        Some(&Value::Str(format!("{manifest}/set.txt")))
+    );
+    assert_eq!(exp.name, "run_x");
+
+    // The operative config holds the expanded paths, so it loads back to the same experiment
+    // whatever the environment is later.
+    let exp = load_text(&text, &[]).unwrap();
+    let operative = exp.to_ron_string();
+    assert!(
+        !operative.contains("CARGO_MANIFEST_DIR") && !operative.contains(UNSET_VAR),
+        "{operative}"
+    );
+    assert!(operative.contains("/fallback/switch.txt"), "{operative}");
+    // A literal `${` in a value is written escaped, so it stays literal when loaded again.
+    assert!(operative.contains("$${literal}"), "{operative}");
+    let again = load_str(
+        &operative,
+        Path::new("operative_config.ron"),
+        &[],
+        &registry(),
+    )
+    .unwrap();
+    assert_eq!(again, exp);
+}
+
+#[test]
+fn an_unset_variable_without_a_default_names_the_variable_key_and_place() {
+    let err = err_text(
+        &format!("(env: (id: \"Dummy-v0\",\n  layout: \"${{{UNSET_VAR}}}/netlist.pb.txt\"))"),
+        &[],
+    );
+    assert_eq!(
+        err,
+        format!(
+            "exp.ron:2:11: `env.layout`: environment variable `{UNSET_VAR}` is not set (set it, \
+             or give a default: `${{{UNSET_VAR}:-DEFAULT}}`)"
+        )
+    );
+    let err = err_text(
+        r#"(env: (id: "Dummy-v0"))"#,
+        &[&format!("env.layout=${{{UNSET_VAR}}}/x")],
+    );
+    assert!(
+        err.starts_with(&format!(
+            "--set env.layout=${{{UNSET_VAR}}}/x: `env.layout`: environment variable `{UNSET_VAR}`"
+        )),
+        "{err}"
+    );
+    let err = err_text(
+        &format!(r#"(profile: (name: "p", env: {{"test": (layout: "${{{UNSET_VAR}}}")}}))"#),
+        &[],
+    );
+    assert!(
+        err.contains("`profile.env.test.layout`") && err.contains(UNSET_VAR),
+        "{err}"
+    );
+    let err = err_text(r#"(env: (id: "Dummy-v0", layout: "${oops"))"#, &[]);
+    assert!(
+        err.contains("`env.layout`") && err.contains("without a closing"),
+        "{err}"
+    );
+}
+
 #[test]
 fn a_profile_is_a_name_or_a_struct_and_can_be_dropped_by_a_later_layer() {
     let exp = load_text(r#"(profile: "orig", env: (id: "Dummy-v0"))"#, &[]).unwrap();

@@ -1,0 +1,244 @@
+//! A suite entry with a `dataset` step: its offline experiment trains on a dataset that
+//! `run_experiments` collects from other experiments of the same suite once they are trained.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use a2perf_core::Value;
+use a2perf_pipeline::{RunEvent, RunOptions, load_plans, run_experiments};
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// Two online experiments on the corridor and an offline one drawing from both.
+fn suite(dir: &Path, dataset: &str) -> PathBuf {
+    write(
+        dir,
+        "online.ron",
+        r#"(env: (id: "Corridor-v0"), algorithm: (name: "random_search"), seeds: [0, 1],
+            training: (total_env_steps: 600, eval_interval: 200, eval_episodes: 2,
+                       checkpoint_interval: 200),
+            inference: (rollouts: 3, timing_samples: 5), generalization: (episodes: 2))"#,
+    );
+    write(
+        dir,
+        "offline.ron",
+        r#"(include: ["online.ron"], name: "offline", algorithm: (name: "toy_bc"))"#,
+    );
+    let out = dir.join("results").display().to_string();
+    write(
+        dir,
+        "suite.ron",
+        &format!(
+            r#"(
+            name: "s",
+            set: ["output.dir={out}"],
+            experiments: [
+                // The offline entry may come first: it is planned after the others.
+                (config: "offline.ron", dataset: {dataset}),
+                (config: "online.ron", set: ["name=a"]),
+                (config: "online.ron", set: ["name=b"]),
+            ],
+        )"#
+        ),
+    )
+}
+
+const STEP: &str = r#"(from: ["a", "b"], level: "intermediate", eval_episodes: 2, episodes: 4)"#;
+
+#[test]
+fn a_dataset_step_collects_from_the_suites_runs_and_trains_on_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let reg = common::registry();
+    let file = suite(tmp.path(), STEP);
+    let loaded = load_plans(std::slice::from_ref(&file), &[], None, &reg).unwrap();
+    // File order is kept.
+    let names: Vec<&str> = loaded.plans.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["offline", "a", "b"]);
+    let offline = &loaded.plans[0];
+    let source = offline
+        .dataset_from
+        .as_ref()
+        .expect("dataset step resolved");
+    assert_eq!(
+        source.runs,
+        [
+            loaded.plans[1].run_dir(0),
+            loaded.plans[1].run_dir(1),
+            loaded.plans[2].run_dir(0),
+            loaded.plans[2].run_dir(1),
+        ]
+    );
+    assert_eq!(source.out, offline.experiment_dir().join("datasets"));
+    assert_eq!(
+        source.samples,
+        source
+            .out
+            .join("Corridor-intermediate-v0")
+            .join("samples.json")
+    );
+    // The experiment's own parameter names the dataset (so its operative config and run.json
+    // do); nothing is collected yet.
+    assert_eq!(
+        offline.algorithm.params["dataset"],
+        Value::Str(source.samples.display().to_string())
+    );
+    assert!(offline.dataset.is_none() && !source.samples.exists());
+
+    let mut phases = Vec::new();
+    let opts = RunOptions {
+        meters: common::test_meters(),
+        ..Default::default()
+    };
+    run_experiments(&reg, &loaded.plans, &opts, &mut |e| {
+        if let RunEvent::Phase(p) = e {
+            phases.push(p)
+        }
+    })
+    .unwrap();
+    assert_eq!(
+        phases,
+        ["train", "collect", "train", "infer", "generalize", "report"]
+    );
+    assert!(source.samples.is_file());
+    for seed in [0, 1] {
+        let run = a2perf_pipeline::LoadedRun::open(&offline.run_dir(seed)).unwrap();
+        let provenance = run.record.dataset.as_ref().expect("dataset provenance");
+        assert_eq!(provenance.dataset_id, "Corridor-intermediate-v0");
+        assert_eq!(provenance.path, source.samples.display().to_string());
+        assert!(provenance.training_sample_cost_kwh.unwrap() > 0.0);
+        assert_eq!(
+            run.record.algorithm.params["dataset"],
+            Value::Str(source.samples.display().to_string())
+        );
+        let operative =
+            std::fs::read_to_string(offline.run_dir(seed).join("operative_config.ron")).unwrap();
+        assert!(
+            operative.contains(&format!("dataset: \"{}\"", source.samples.display())),
+            "{operative}"
+        );
+        assert!(offline.run_dir(seed).join("inference.json").is_file());
+    }
+    // Every source run's checkpoints were evaluated for the levels.
+    for run in &source.runs {
+        assert!(
+            run.join("collect/evaluation.json").is_file(),
+            "{}",
+            run.display()
+        );
+    }
+
+    // A second run finds everything complete: nothing is collected or trained again.
+    let stamp = std::fs::metadata(&source.samples)
+        .unwrap()
+        .modified()
+        .unwrap();
+    let before = std::fs::read(offline.run_dir(0).join("policy.ckpt")).unwrap();
+    run_experiments(&reg, &loaded.plans, &opts, &mut |_| {}).unwrap();
+    assert_eq!(
+        std::fs::metadata(&source.samples)
+            .unwrap()
+            .modified()
+            .unwrap(),
+        stamp
+    );
+    assert_eq!(
+        std::fs::read(offline.run_dir(0).join("policy.ckpt")).unwrap(),
+        before
+    );
+
+    // An unfinished offline run gets its dataset again, identical (collection is seeded).
+    let samples_before = std::fs::read(&source.samples).unwrap();
+    std::fs::remove_dir_all(offline.run_dir(1)).unwrap();
+    run_experiments(&reg, &loaded.plans, &opts, &mut |_| {}).unwrap();
+    assert_eq!(std::fs::read(&source.samples).unwrap(), samples_before);
+    assert_eq!(
+        std::fs::read(offline.run_dir(0).join("policy.ckpt")).unwrap(),
+        before
+    );
+}
+
+#[test]
+fn dataset_step_errors_name_the_suite_the_experiment_and_the_problem() {
+    let reg = common::registry();
+    let cases: [(&str, &str); 6] = [
+        (
+            r#"(from: ["a", "bb"])"#,
+            "no experiment named `bb` in this suite (did you mean `b`?)",
+        ),
+        (r#"(from: [])"#, "dataset.from names no experiment"),
+        (
+            r#"(from: ["a"], level: "guru")"#,
+            "dataset.level `guru`: expected `novice`, `intermediate` or `expert`",
+        ),
+        (
+            r#"(from: ["a"], cost: "free")"#,
+            "dataset.cost `free`: expected `measured` or `pro_rata`",
+        ),
+        (
+            r#"(from: ["a"], episodes: 0)"#,
+            "`eval_episodes` and `episodes` must be at least 1",
+        ),
+        (r#"(form: ["a"])"#, "form"),
+    ];
+    for (step, expected) in cases {
+        let tmp = tempfile::tempdir().unwrap();
+        let file = suite(tmp.path(), step);
+        let err = load_plans(std::slice::from_ref(&file), &[], None, &reg)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(expected), "{step}: {err}");
+        assert!(err.contains("suite.ron"), "{step}: {err}");
+    }
+
+    // Sources on different tasks, and an offline experiment on another environment.
+    let tmp = tempfile::tempdir().unwrap();
+    let file = suite(tmp.path(), STEP);
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace(r#"set: ["name=b"]"#, r#"set: ["name=b", "env.length=5"]"#);
+    std::fs::write(&file, text).unwrap();
+    let err = load_plans(std::slice::from_ref(&file), &[], None, &reg)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("experiment `offline` (offline.ron)")
+            && err.contains("a dataset is collected from one task"),
+        "{err}"
+    );
+    // An offline experiment on another task than its sources.
+    let tmp = tempfile::tempdir().unwrap();
+    let file = suite(tmp.path(), STEP);
+    write(
+        tmp.path(),
+        "offline.ron",
+        r#"(include: ["online.ron"], name: "offline", algorithm: (name: "toy_bc"),
+            env: (id: "Corridor-v0", length: 5))"#,
+    );
+    let err = load_plans(std::slice::from_ref(&file), &[], None, &reg)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("experiment `offline` (offline.ron)") && err.contains("not the task of `a`"),
+        "{err}"
+    );
+    // An algorithm without a `dataset` parameter cannot take one.
+    let tmp = tempfile::tempdir().unwrap();
+    let file = suite(tmp.path(), STEP);
+    write(
+        tmp.path(),
+        "offline.ron",
+        r#"(include: ["online.ron"], name: "offline")"#,
+    );
+    let err = load_plans(std::slice::from_ref(&file), &[], None, &reg)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("algorithm `random_search` has no `dataset` parameter"),
+        "{err}"
+    );
+}
