@@ -147,4 +147,7 @@ fn the_paper_suite_runs_end_to_end_at_tiny_budgets_on_one_task_per_domain() {
         );
     }
     assert!(md.contains("Profile: a2perf"), "{md}");
+    // Timed on random samples, and the report says so rather than claiming rollout observations.
+    assert!(md.contains("on random observation-space samples"), "{md}");
+    assert!(!md.contains("met in the rollouts"), "{md}");
 }

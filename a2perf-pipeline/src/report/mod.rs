@@ -25,7 +25,7 @@ pub mod paper;
 pub mod render;
 pub mod svg;
 
-use super::plan::{GeneralizationSuite, ProfileRecord, SuiteSource};
+use super::plan::{GeneralizationSuite, ObservationSource, ProfileRecord, SuiteSource};
 
 /// The four metric families of the paper (system split into training and inference).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
@@ -128,6 +128,24 @@ pub struct RunData {
     pub generalization: Option<GeneralizationResults>,
     /// Machine it was trained on.
     pub system_info: Option<SystemInfo>,
+}
+
+/// Which observations the seeds' inference times were measured on (the profile times random
+/// observation-space samples, as the original harness did; the default, the rollouts').
+fn inference_time_note(runs: &[RunData]) -> String {
+    let sources: Vec<ObservationSource> = runs
+        .iter()
+        .filter_map(|r| r.inference.as_ref().map(|i| i.observation_source))
+        .collect();
+    let all = |s: ObservationSource| !sources.is_empty() && sources.iter().all(|x| *x == s);
+    if all(ObservationSource::Random) {
+        "per call, on random observation-space samples (the original harness's method)".into()
+    } else if sources.is_empty() || all(ObservationSource::Rollouts) {
+        "per call, on the observations met in the rollouts".into()
+    } else {
+        "per call; the seeds differ in what was timed (rollout observations or random samples)"
+            .into()
+    }
 }
 
 fn read_opt<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<Option<T>> {
@@ -829,7 +847,7 @@ fn group_report(group: &Group, opts: &ReportOptions) -> GroupReport {
             })
             .collect(),
         "run `a2perf infer` first",
-        vec!["per call, on the observations met in the rollouts".into()],
+        vec![inference_time_note(runs)],
         reps,
         &mut rng,
     ));
