@@ -1,0 +1,296 @@
+//! Python callables as the benchmark's policies, so that the pipelines roll a Python agent out
+//! exactly as they roll out a built-in one (same environments, seeds and per-call timer).
+//!
+//! A [`PyPolicy`] hands the callable each observation as the Gymnasium environment returns it (a
+//! fresh float32 array, or a dict of them) and, when the callable takes a second argument, an
+//! info dict holding `action_mask` (int8, 1 = legal) as the environment's `info` does. The
+//! returned action is checked like `env.step`'s (type, shape, bounds, and the mask).
+//!
+//! A Python exception cannot travel through the pipeline's error types, so the policy keeps the
+//! first one in an [`ErrorSlot`] and fails with a placeholder; [`pipeline_error`] puts the
+//! exception back, its message prefixed with where the rollout failed (run, episode, step).
+
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use a2perf_core::{
+    ActMode, Action, Checkpoint, EnvError, EnvSpec, Observation, Policy, PolicyError, RunError,
+};
+use a2perf_pipeline::{LoadedRun, PipelineError, PolicySource, RegistryPolicies};
+use pyo3::exceptions::{
+    PyFileNotFoundError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError,
+};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+
+use crate::convert::ActionSpec;
+use crate::env::{ObsLayout, mask_to_py};
+use crate::errors::registry_error;
+
+/// What went wrong in a Python policy.
+pub enum PolicyFailure {
+    /// The callable (or a policy loader) raised this exception.
+    Raised(PyErr),
+    /// The callable returned an action that `env.step` would refuse (the exception says why).
+    BadAction(PyErr),
+}
+
+/// The first failure of the Python policies of one pipeline call.
+pub type ErrorSlot = Arc<Mutex<Option<PolicyFailure>>>;
+
+fn keep(slot: &ErrorSlot, failure: PolicyFailure) {
+    if let Ok(mut s) = slot.lock()
+        && s.is_none()
+    {
+        *s = Some(failure);
+    }
+}
+
+/// A Python callable `obs -> action` (or `(obs, info) -> action`) for one environment.
+pub struct PyPolicy {
+    callable: Py<PyAny>,
+    with_info: bool,
+    layout: ObsLayout,
+    action: ActionSpec,
+    errors: ErrorSlot,
+}
+
+impl PyPolicy {
+    /// `callable` as the policy of an environment with `spec`; its failures go to `errors`.
+    pub fn new(
+        py: Python<'_>,
+        callable: Py<PyAny>,
+        with_info: bool,
+        spec: &EnvSpec,
+        errors: ErrorSlot,
+    ) -> PyResult<Self> {
+        Ok(Self {
+            callable,
+            with_info,
+            layout: ObsLayout::of(py, &spec.observation_space)?,
+            action: ActionSpec::of(&spec.action_space)?,
+            errors,
+        })
+    }
+
+    fn call(&self, py: Python<'_>, obs: &Observation) -> Result<Action, PolicyFailure> {
+        let o = self
+            .layout
+            .to_py(py, obs)
+            .map_err(PolicyFailure::Raised)?;
+        let callable = self.callable.bind(py);
+        let returned = if self.with_info {
+            let info = PyDict::new(py);
+            if let Some(mask) = &obs.action_mask {
+                info.set_item(pyo3::intern!(py, "action_mask"), mask_to_py(py, mask))
+                    .map_err(PolicyFailure::Raised)?;
+            }
+            callable.call1((o, info))
+        } else {
+            callable.call1((o,))
+        }
+        .map_err(PolicyFailure::Raised)?;
+        let mut action = match self.action {
+            ActionSpec::Discrete(_) => Action::Discrete(0),
+            ActionSpec::Box { .. } => Action::Continuous(Vec::new()),
+        };
+        self.action
+            .parse(&returned, &mut action)
+            .map_err(PolicyFailure::BadAction)?;
+        if let Action::Discrete(a) = action
+            && let Some(mask) = &obs.action_mask
+            && !mask.get(a).copied().unwrap_or(false)
+        {
+            return Err(PolicyFailure::BadAction(PyValueError::new_err(format!(
+                "action {a} is masked out in this state (info[\"action_mask\"][{a}] == 0)"
+            ))));
+        }
+        Ok(action)
+    }
+}
+
+impl Policy for PyPolicy {
+    fn act(&mut self, obs: &Observation, _mode: ActMode) -> Result<Action, PolicyError> {
+        Python::attach(|py| self.call(py, obs)).map_err(|failure| {
+            keep(&self.errors, failure);
+            PolicyError::BadObservation("the Python policy failed (see the Python exception)".into())
+        })
+    }
+
+    fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
+        Err(PolicyError::BadCheckpoint(
+            "a Python policy is saved by the agent's own code (TrainingRun.save_checkpoint)"
+                .into(),
+        ))
+    }
+}
+
+/// One Python callable as every policy of a pipeline call (`a2perf_rs.infer`, `generalize`).
+pub struct CallablePolicies {
+    callable: Py<PyAny>,
+    with_info: bool,
+    /// Failures of its policies.
+    pub errors: ErrorSlot,
+}
+
+impl CallablePolicies {
+    /// `callable`, called with the info dict when `with_info`.
+    pub fn new(callable: Py<PyAny>, with_info: bool) -> Self {
+        Self {
+            callable,
+            with_info,
+            errors: ErrorSlot::default(),
+        }
+    }
+
+    /// A policy for an environment with `spec`.
+    pub fn for_spec(&self, py: Python<'_>, spec: &EnvSpec) -> PyResult<PyPolicy> {
+        PyPolicy::new(
+            py,
+            self.callable.clone_ref(py),
+            self.with_info,
+            spec,
+            self.errors.clone(),
+        )
+    }
+}
+
+impl PolicySource for CallablePolicies {
+    fn policy(
+        &mut self,
+        run: &LoadedRun,
+        _checkpoint: &Path,
+        spec: &EnvSpec,
+    ) -> a2perf_pipeline::Result<Box<dyn Policy>> {
+        Python::attach(|py| self.for_spec(py, spec))
+            .map(|p| Box::new(p) as Box<dyn Policy>)
+            .map_err(|e| {
+                keep(&self.errors, PolicyFailure::Raised(e));
+                PipelineError::Invalid(format!("{}: the policy cannot be used", run.dir.display()))
+            })
+    }
+
+    fn errors_are_fatal(&self) -> bool {
+        true
+    }
+}
+
+/// Checkpoints of external runs through a Python loader `path -> (policy, with_info)`; those of
+/// built-in runs through the registry (`a2perf_rs.collect`).
+pub struct LoaderPolicies<'r> {
+    loader: Py<PyAny>,
+    registry: &'r a2perf_core::Registry,
+    /// Failures of the loader and its policies.
+    pub errors: ErrorSlot,
+}
+
+impl<'r> LoaderPolicies<'r> {
+    /// `loader(path)` must return `(callable, with_info)`.
+    pub fn new(loader: Py<PyAny>, registry: &'r a2perf_core::Registry) -> Self {
+        Self {
+            loader,
+            registry,
+            errors: ErrorSlot::default(),
+        }
+    }
+}
+
+impl PolicySource for LoaderPolicies<'_> {
+    fn policy(
+        &mut self,
+        run: &LoadedRun,
+        checkpoint: &Path,
+        spec: &EnvSpec,
+    ) -> a2perf_pipeline::Result<Box<dyn Policy>> {
+        if run.record.external.is_none() {
+            return RegistryPolicies(self.registry).policy(run, checkpoint, spec);
+        }
+        let loaded = Python::attach(|py| -> PyResult<PyPolicy> {
+            let pair = self
+                .loader
+                .bind(py)
+                .call1((checkpoint.to_string_lossy().into_owned(),))?;
+            let pair = pair.cast::<PyTuple>()?;
+            let callable: Py<PyAny> = pair.get_item(0)?.unbind();
+            let with_info: bool = pair.get_item(1)?.extract()?;
+            PyPolicy::new(py, callable, with_info, spec, self.errors.clone())
+        });
+        loaded
+            .map(|p| Box::new(p) as Box<dyn Policy>)
+            .map_err(|e| {
+                keep(&self.errors, PolicyFailure::Raised(e));
+                PipelineError::Invalid(format!(
+                    "{}: load_policy failed",
+                    checkpoint.display()
+                ))
+            })
+    }
+
+    fn errors_are_fatal(&self) -> bool {
+        true
+    }
+}
+
+/// `failure` again, as the same exception type with `prefix` in front of its message (and the
+/// original as `__cause__` when the policy raised it).
+fn relocated(py: Python<'_>, prefix: &str, failure: PolicyFailure) -> PyErr {
+    let (err, what, chain) = match failure {
+        PolicyFailure::Raised(e) => (e, "the policy raised", true),
+        PolicyFailure::BadAction(e) => (e, "the policy returned an invalid action:", false),
+    };
+    let ty = err.get_type(py);
+    let type_name = ty.name().map(|n| n.to_string()).unwrap_or_default();
+    let text = if chain {
+        format!("{prefix}{what} {type_name}: {}", err.value(py))
+    } else {
+        format!("{prefix}{what} {}", err.value(py))
+    };
+    // The same type when it can be built from a message (every built-in exception can).
+    let new = ty
+        .call1((text.clone(),))
+        .ok()
+        .filter(|v| v.is_instance_of::<pyo3::exceptions::PyBaseException>())
+        .map(PyErr::from_value)
+        .unwrap_or_else(|| PyRuntimeError::new_err(text));
+    if chain {
+        new.set_cause(py, Some(err));
+    }
+    new
+}
+
+/// A pipeline error as a Python exception: a policy's own failure (kept in `errors`) comes back
+/// as its exception type, named by run, episode and step; the rest map by kind (`ValueError`
+/// for bad requests and files, `FileNotFoundError`/`OSError` for i/o, `TypeError` for
+/// parameters, `RuntimeError` for failed rollouts).
+pub fn pipeline_error(e: PipelineError, errors: Option<&ErrorSlot>) -> PyErr {
+    let failure = errors.and_then(|s| s.lock().ok().and_then(|mut f| f.take()));
+    Python::attach(|py| {
+        if let Some(failure) = failure {
+            let prefix = match &e {
+                PipelineError::Rollout {
+                    run, episode, step, ..
+                } => format!("{run}: episode {episode}, step {step} (counted from 0): "),
+                PipelineError::Run { run, .. } => format!("{run}: "),
+                other => format!("{other}: "),
+            };
+            return relocated(py, &prefix, failure);
+        }
+        let msg = e.to_string();
+        match e {
+            PipelineError::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
+                PyFileNotFoundError::new_err(msg)
+            }
+            PipelineError::Io { .. } => PyOSError::new_err(msg),
+            PipelineError::Registry(r) => registry_error(r, |_| None),
+            PipelineError::Rollout {
+                source: RunError::Env(EnvError::InvalidAction { .. }),
+                ..
+            } => PyValueError::new_err(msg),
+            PipelineError::Rollout { .. } | PipelineError::Run { .. } => {
+                PyRuntimeError::new_err(msg)
+            }
+            PipelineError::Cancelled => PyKeyboardInterrupt::new_err(msg),
+            PipelineError::Corrupt { .. } | PipelineError::Invalid(_) => PyValueError::new_err(msg),
+        }
+    })
+}
