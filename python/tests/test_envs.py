@@ -72,6 +72,7 @@ def test_spaces_are_the_rust_spaces_exactly() -> None:
     assert isinstance(web.observation_space, gym.spaces.Dict)
     assert list(web.observation_space.keys()) == [
         "profile_keys", "profile_values", "profile_mask", "dom_tokens", "dom_features", "dom_mask",
+        "time_step",
     ]
     assert web.observation_space["dom_tokens"].shape[0] == 20
     assert web.action_space == gym.spaces.Discrete(20 * 5 * 2)
