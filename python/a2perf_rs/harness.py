@@ -160,8 +160,9 @@ class TrainingRun:
             self._native.finish("completed", "")
             return False
         outcome = "interrupted" if issubclass(exc_type, KeyboardInterrupt) else "failed"
+        note = f"{exc_type.__name__}: {exc}" if str(exc) else exc_type.__name__
         try:
-            self._native.finish(outcome, f"{exc_type.__name__}: {exc}")
+            self._native.finish(outcome, note)
         except Exception as finish_error:  # the agent's exception matters more
             warnings.warn(
                 f"{self.run_dir}: could not mark the run {outcome}: {finish_error}", stacklevel=2

@@ -232,18 +232,19 @@ impl PolicySource for LoaderPolicies<'_> {
 }
 
 /// `failure` again, as the same exception type with `prefix` in front of its message (and the
-/// original as `__cause__` when the policy raised it).
-fn relocated(py: Python<'_>, prefix: &str, failure: PolicyFailure) -> PyErr {
-    let (err, what, chain) = match failure {
-        PolicyFailure::Raised(e) => (e, "the policy raised", true),
-        PolicyFailure::BadAction(e) => (e, "the policy returned an invalid action:", false),
+/// original as `__cause__` when it was raised by the user's code). `in_rollout`: the failure
+/// happened in a policy call (rather than in loading a policy).
+fn relocated(py: Python<'_>, prefix: &str, failure: PolicyFailure, in_rollout: bool) -> PyErr {
+    let (err, raised) = match failure {
+        PolicyFailure::Raised(e) => (e, true),
+        PolicyFailure::BadAction(e) => (e, false),
     };
     let ty = err.get_type(py);
     let type_name = ty.name().map(|n| n.to_string()).unwrap_or_default();
-    let text = if chain {
-        format!("{prefix}{what} {type_name}: {}", err.value(py))
-    } else {
-        format!("{prefix}{what} {}", err.value(py))
+    let text = match (raised, in_rollout) {
+        (true, true) => format!("{prefix}the policy raised {type_name}: {}", err.value(py)),
+        (true, false) => format!("{prefix}{type_name}: {}", err.value(py)),
+        (false, _) => format!("{prefix}the policy returned an invalid action: {}", err.value(py)),
     };
     // The same type when it can be built from a message (every built-in exception can).
     let new = ty
@@ -252,7 +253,7 @@ fn relocated(py: Python<'_>, prefix: &str, failure: PolicyFailure) -> PyErr {
         .filter(|v| v.is_instance_of::<pyo3::exceptions::PyBaseException>())
         .map(PyErr::from_value)
         .unwrap_or_else(|| PyRuntimeError::new_err(text));
-    if chain {
+    if raised {
         new.set_cause(py, Some(err));
     }
     new
@@ -266,14 +267,17 @@ pub fn pipeline_error(e: PipelineError, errors: Option<&ErrorSlot>) -> PyErr {
     let failure = errors.and_then(|s| s.lock().ok().and_then(|mut f| f.take()));
     Python::attach(|py| {
         if let Some(failure) = failure {
-            let prefix = match &e {
+            let (prefix, in_rollout) = match &e {
                 PipelineError::Rollout {
                     run, episode, step, ..
-                } => format!("{run}: episode {episode}, step {step} (counted from 0): "),
-                PipelineError::Run { run, .. } => format!("{run}: "),
-                other => format!("{other}: "),
+                } => (
+                    format!("{run}: episode {episode}, step {step} (counted from 0): "),
+                    true,
+                ),
+                PipelineError::Run { run, .. } => (format!("{run}: "), true),
+                other => (format!("{other}: "), false),
             };
-            return relocated(py, &prefix, failure);
+            return relocated(py, &prefix, failure, in_rollout);
         }
         let msg = e.to_string();
         match e {
