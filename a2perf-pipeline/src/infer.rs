@@ -122,7 +122,8 @@ pub fn infer_run(registry: &Registry, dir: &Path, opts: &InferOptions) -> Result
 }
 
 /// [`infer_run`] with the run's final policy taken from `policies` (for an external agent, a
-/// front end's policy; see [`PolicySource`]). Every `act` call is timed the same way. A failed
+/// front end's policy; see [`PolicySource`]). Every `act` call is timed the same way (after the
+/// policy's [`Policy::prepare`](a2perf_core::Policy::prepare), outside the timer). A failed
 /// rollout (an error naming its episode and step) writes nothing: no `inference.json`, and the
 /// meters' `inference_emissions.csv` is left as it was.
 pub fn infer_run_with(
@@ -194,9 +195,11 @@ pub fn infer_run_with(
                 .collect();
             let mut times = Vec::with_capacity(random_n);
             for (k, obs) in samples.iter().enumerate() {
-                let t = Instant::now();
-                let r = policy.act(obs, ActMode::Greedy);
-                let dt = t.elapsed().as_secs_f64() * 1e3;
+                let r = policy.prepare(obs).and_then(|()| {
+                    let t = Instant::now();
+                    policy.act(obs, ActMode::Greedy).map(|_| t.elapsed())
+                });
+                let dt = r.as_ref().map_or(0.0, |d| d.as_secs_f64() * 1e3);
                 match r {
                     Ok(_) => times.push(dt),
                     Err(e) if fatal => {
@@ -241,8 +244,8 @@ pub fn infer_run_with(
     finished
 }
 
-/// One greedy episode, timing every `act` call (milliseconds appended to `times_ms`). An error
-/// comes with the step it happened at.
+/// One greedy episode, timing every `act` call (milliseconds appended to `times_ms`; the
+/// policy's `prepare` is not timed). An error comes with the step it happened at.
 fn timed_rollout(
     env: &mut dyn Env,
     policy: &mut dyn Policy,
@@ -256,6 +259,9 @@ fn timed_rollout(
     let mut ret = 0.0;
     let mut len = 0usize;
     loop {
+        policy
+            .prepare(&step.observation)
+            .map_err(|e| (len, e.into()))?;
         let t = Instant::now();
         let action = policy
             .act(&step.observation, ActMode::Greedy)

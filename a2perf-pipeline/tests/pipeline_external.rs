@@ -531,3 +531,82 @@ fn episode_seeds_are_those_of_the_builtin_training_environments() {
     };
     assert_eq!(next, single.reset(Some(episode_seed(7, 0, 1))).unwrap());
 }
+
+/// Walks right; checks that every `act` was prepared with its own observation just before.
+#[derive(Default)]
+struct Prepared {
+    pending: Option<Observation>,
+    prepared: usize,
+    unprepared_calls: usize,
+}
+
+impl Policy for Prepared {
+    fn act(&mut self, obs: &Observation, _mode: ActMode) -> Result<Action, PolicyError> {
+        match self.pending.take() {
+            Some(p) if p == *obs => {}
+            _ => self.unprepared_calls += 1,
+        }
+        Ok(Action::Discrete(1))
+    }
+    fn prepare(&mut self, obs: &Observation) -> Result<(), PolicyError> {
+        self.prepared += 1;
+        self.pending = Some(obs.clone());
+        Ok(())
+    }
+    fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
+        Err(PolicyError::BadCheckpoint("saved by the agent's own code".into()))
+    }
+}
+
+/// Hands out one shared [`Prepared`] policy and keeps its counts.
+#[derive(Default)]
+struct PreparedSource(std::sync::Arc<std::sync::Mutex<Prepared>>);
+
+struct SharedPrepared(std::sync::Arc<std::sync::Mutex<Prepared>>);
+
+impl Policy for SharedPrepared {
+    fn act(&mut self, obs: &Observation, mode: ActMode) -> Result<Action, PolicyError> {
+        self.0.lock().unwrap().act(obs, mode)
+    }
+    fn prepare(&mut self, obs: &Observation) -> Result<(), PolicyError> {
+        self.0.lock().unwrap().prepare(obs)
+    }
+    fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
+        self.0.lock().unwrap().checkpoint()
+    }
+}
+
+impl PolicySource for PreparedSource {
+    fn policy(
+        &mut self,
+        _run: &LoadedRun,
+        _checkpoint: &Path,
+        _spec: &EnvSpec,
+    ) -> a2perf_pipeline::Result<Box<dyn Policy>> {
+        Ok(Box::new(SharedPrepared(self.0.clone())))
+    }
+}
+
+#[test]
+fn inference_prepares_every_timed_call_with_its_own_observation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let reg = common::registry();
+    let e = train_external(tmp.path(), &config(tmp.path()), 0);
+    for (source, samples) in [
+        (a2perf_pipeline::ObservationSource::Rollouts, 0),
+        (a2perf_pipeline::ObservationSource::Random, 11),
+    ] {
+        let mut policies = PreparedSource::default();
+        let opts = InferOptions {
+            observation_source: Some(source),
+            timing_samples: Some(11),
+            ..InferOptions::default()
+        };
+        let r = a2perf_pipeline::infer_run_with(&reg, &e, &mut policies, &opts).unwrap();
+        let p = policies.0.lock().unwrap();
+        let calls: usize = r.episode_lengths.iter().sum();
+        assert_eq!(r.rollout_call_time_ms.count, calls);
+        assert_eq!(p.prepared, calls + samples, "{source:?}");
+        assert_eq!(p.unprepared_calls, 0, "{source:?}");
+    }
+}

@@ -53,6 +53,8 @@ pub struct PyPolicy {
     layout: ObsLayout,
     action: ActionSpec,
     errors: ErrorSlot,
+    /// The arguments of the next call, converted by `prepare` outside the inference timer.
+    prepared: Option<Py<PyTuple>>,
 }
 
 impl PyPolicy {
@@ -70,26 +72,34 @@ impl PyPolicy {
             layout: ObsLayout::of(py, &spec.observation_space)?,
             action: ActionSpec::of(&spec.action_space)?,
             errors,
+            prepared: None,
         })
     }
 
-    fn call(&self, py: Python<'_>, obs: &Observation) -> Result<Action, PolicyFailure> {
-        let o = self
-            .layout
-            .to_py(py, obs)
-            .map_err(PolicyFailure::Raised)?;
-        let callable = self.callable.bind(py);
-        let returned = if self.with_info {
+    /// The callable's arguments for `obs`: `(obs,)` or `(obs, info)`, fresh objects.
+    fn arguments<'py>(&self, py: Python<'py>, obs: &Observation) -> PyResult<Bound<'py, PyTuple>> {
+        let o = self.layout.to_py(py, obs)?;
+        if self.with_info {
             let info = PyDict::new(py);
             if let Some(mask) = &obs.action_mask {
-                info.set_item(pyo3::intern!(py, "action_mask"), mask_to_py(py, mask))
-                    .map_err(PolicyFailure::Raised)?;
+                info.set_item(pyo3::intern!(py, "action_mask"), mask_to_py(py, mask))?;
             }
-            callable.call1((o, info))
+            PyTuple::new(py, [o, info.into_any()])
         } else {
-            callable.call1((o,))
+            PyTuple::new(py, [o])
         }
-        .map_err(PolicyFailure::Raised)?;
+    }
+
+    fn call(&mut self, py: Python<'_>, obs: &Observation) -> Result<Action, PolicyFailure> {
+        let args = match self.prepared.take() {
+            Some(args) => args.into_bound(py),
+            None => self.arguments(py, obs).map_err(PolicyFailure::Raised)?,
+        };
+        let returned = self
+            .callable
+            .bind(py)
+            .call1(args)
+            .map_err(PolicyFailure::Raised)?;
         let mut action = match self.action {
             ActionSpec::Discrete(_) => Action::Discrete(0),
             ActionSpec::Box { .. } => Action::Continuous(Vec::new()),
@@ -109,12 +119,30 @@ impl PyPolicy {
     }
 }
 
+impl PyPolicy {
+    fn failed(&self, failure: PolicyFailure) -> PolicyError {
+        keep(&self.errors, failure);
+        PolicyError::BadObservation("the Python policy failed (see the Python exception)".into())
+    }
+}
+
 impl Policy for PyPolicy {
     fn act(&mut self, obs: &Observation, _mode: ActMode) -> Result<Action, PolicyError> {
-        Python::attach(|py| self.call(py, obs)).map_err(|failure| {
-            keep(&self.errors, failure);
-            PolicyError::BadObservation("the Python policy failed (see the Python exception)".into())
-        })
+        Python::attach(|py| self.call(py, obs)).map_err(|failure| self.failed(failure))
+    }
+
+    /// Converts the observation (and the mask) into numpy arrays before the timer starts, as
+    /// the original harness's Gymnasium environment handed them over: the time of `act` is the
+    /// callable's, plus the call and the action check.
+    fn prepare(&mut self, obs: &Observation) -> Result<(), PolicyError> {
+        let args = Python::attach(|py| self.arguments(py, obs).map(Bound::unbind));
+        match args {
+            Ok(args) => {
+                self.prepared = Some(args);
+                Ok(())
+            }
+            Err(e) => Err(self.failed(PolicyFailure::Raised(e))),
+        }
     }
 
     fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
