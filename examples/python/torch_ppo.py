@@ -49,7 +49,9 @@ class ActorCritic(nn.Module):
             linear(obs_dim, hidden), nn.Tanh(), linear(hidden, hidden), nn.Tanh(),
             linear(hidden, act_dim, 0.01),
         )
-        self.log_std = nn.Parameter(torch.zeros(act_dim))
+        # Small pose offsets (std 0.135 rad), as configs/quadruped_locomotion/ppo.ron found
+        # necessary: wider exploration topples the robot before it learns anything.
+        self.log_std = nn.Parameter(torch.full((act_dim,), -2.0))
 
     def value(self, x: torch.Tensor) -> torch.Tensor:
         return self.critic(x).squeeze(-1)
@@ -149,10 +151,12 @@ def main() -> None:
             last = np.zeros(n)
             for i in reversed(range(t)):
                 nv = next_value if i == t - 1 else val_buf[i + 1].numpy()
-                # A step ending an episode does not bootstrap; the reset step after it is masked.
+                # A terminal step does not bootstrap; a truncated one bootstraps from its final
+                # observation (the reset step's stored one). The reset step itself is masked out
+                # of the loss and cuts the advantage chain.
                 cont = 1.0 - done_buf[i]
                 nxt_valid = 1.0 if i == t - 1 else valid_buf[i + 1]
-                delta = rew_buf[i] + a.gamma * nv * cont * nxt_valid - val_buf[i].numpy()
+                delta = rew_buf[i] + a.gamma * nv * cont - val_buf[i].numpy()
                 last = delta + a.gamma * a.gae_lambda * cont * nxt_valid * last
                 adv[i] = last
             ret = adv + val_buf.numpy()
