@@ -224,7 +224,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"report of {len(report['groups'])} (task, algorithm) groups: {out}/report.md")
         for group in report["groups"]:
             returns = next(m for m in group["metrics"] if m["key"] == "returns")
-            print(f"  {group['algorithm']:>10} on {group['task']}: returns {returns['mean']}")
+            mean = "—" if returns["mean"] is None else f"{returns['mean']:.2f}"
+            print(f"  {group['algorithm']:>10} on {group['task']}: returns {mean}")
         for run_dir, why in report["skipped_runs"]:
             print(f"  left out {run_dir}: {why}")
     return 0
