@@ -179,10 +179,7 @@ pub fn external_plan(registry: &Registry, spec: &ExternalRunSpec) -> Result<Expe
              (e.g. `my-{name}`) so that reports keep the two apart"
         )));
     }
-    let experiment = spec
-        .experiment
-        .clone()
-        .unwrap_or_else(|| path_safe(name));
+    let experiment = spec.experiment.clone().unwrap_or_else(|| path_safe(name));
     if experiment.is_empty() || path_safe(&experiment) != experiment || experiment.starts_with('.')
     {
         return Err(PipelineError::Invalid(format!(
@@ -408,7 +405,12 @@ impl ExternalRun {
     /// Records an evaluation point, as the built-in curve does (its wall-clock second is the
     /// run's clock now), and rewrites `curve.csv` and `curve.json` so that a run that dies
     /// keeps its curve. Steps must increase from one point to the next; returns must be finite.
-    pub fn log_evaluation(&mut self, env_steps: u64, mean_return: f64, std_return: f64) -> Result<()> {
+    pub fn log_evaluation(
+        &mut self,
+        env_steps: u64,
+        mean_return: f64,
+        std_return: f64,
+    ) -> Result<()> {
         if let Some(last) = self.curve.points.last()
             && env_steps <= last.env_steps
         {
@@ -503,9 +505,11 @@ impl ExternalRun {
                 RunState::Complete,
                 "trained by an external agent (a2perf_rs.TrainingRun)".to_string(),
             ),
-            ExternalOutcome::Failed(why) => {
-                (SegmentOutcome::Failed, RunState::Failed, format!("failed: {why}"))
-            }
+            ExternalOutcome::Failed(why) => (
+                SegmentOutcome::Failed,
+                RunState::Failed,
+                format!("failed: {why}"),
+            ),
             ExternalOutcome::Interrupted(why) => (
                 SegmentOutcome::Interrupted,
                 RunState::Interrupted,

@@ -9,10 +9,10 @@ use a2perf_core::{
 };
 use serde::{Deserialize, Serialize};
 
+use super::meters::INFERENCE_EMISSIONS_FILE;
 use super::plan::ObservationSource;
 use super::stats::Summary;
 use super::train::{MeterFactory, Phase, PhaseSystem, measured, no_meters};
-use super::meters::INFERENCE_EMISSIONS_FILE;
 use super::{
     INFERENCE_FILE, LoadedRun, POLICY_FILE, PipelineError, PolicySource, RegistryPolicies, Result,
     io_err, progress,
@@ -204,7 +204,10 @@ pub fn infer_run_with(
                     Ok(_) => times.push(dt),
                     Err(e) if fatal => {
                         return Err(PipelineError::Run {
-                            run: format!("{} (timing call {k} on a random observation)", dir.display()),
+                            run: format!(
+                                "{} (timing call {k} on a random observation)",
+                                dir.display()
+                            ),
                             source: e.into(),
                         });
                     }

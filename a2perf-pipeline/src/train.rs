@@ -14,8 +14,8 @@ use std::time::Instant;
 
 use a2perf_core::{
     CancelToken, DirectoryCheckpoints, LearningCurve, Measurement, Meter, MeterReport, MeterSet,
-    Provenance, Registry, ResumeDir, ResumePoint, ResumeWrite, RunDir, RunError, RunState, TrainingContext,
-    write_atomic, write_json_atomic,
+    Provenance, Registry, ResumeDir, ResumePoint, ResumeWrite, RunDir, RunError, RunState,
+    TrainingContext, write_atomic, write_json_atomic,
 };
 use serde::{Deserialize, Serialize};
 
@@ -704,7 +704,11 @@ impl PlannedRun {
 }
 
 /// `run.json`, `system_info.json` and the operative config of a run that starts training.
-pub(crate) fn write_run_files(run: &RunDir, record_json: &[u8], plan: &ExperimentPlan) -> Result<()> {
+pub(crate) fn write_run_files(
+    run: &RunDir,
+    record_json: &[u8],
+    plan: &ExperimentPlan,
+) -> Result<()> {
     write_atomic(&run.file(RUN_FILE), record_json).map_err(io_err(&run.file(RUN_FILE)))?;
     write_json_atomic(&run.file(SYSTEM_INFO_FILE), &SystemInfo::current())?;
     if let Some(write) = &plan.operative {

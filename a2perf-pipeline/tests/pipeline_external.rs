@@ -33,7 +33,9 @@ impl Policy for Right {
         Ok(Action::Discrete(1))
     }
     fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
-        Err(PolicyError::BadCheckpoint("saved by the agent's own code".into()))
+        Err(PolicyError::BadCheckpoint(
+            "saved by the agent's own code".into(),
+        ))
     }
 }
 
@@ -119,7 +121,10 @@ fn train_external(out: &Path, config: &Path, seed: u64) -> PathBuf {
     run.save_checkpoint(300, &ckpt).unwrap();
     run.save_checkpoint(600, &ckpt).unwrap();
     let dir = run.dir().to_path_buf();
-    assert_eq!(run.finish(ExternalOutcome::Completed).unwrap(), RunState::Complete);
+    assert_eq!(
+        run.finish(ExternalOutcome::Completed).unwrap(),
+        RunState::Complete
+    );
     dir
 }
 
@@ -199,7 +204,10 @@ fn external_run_is_recorded_like_a_builtin_one() {
     let csv = std::fs::read_to_string(e.join("curve.csv")).unwrap();
     assert_eq!(
         csv.lines().next(),
-        std::fs::read_to_string(b.join("curve.csv")).unwrap().lines().next()
+        std::fs::read_to_string(b.join("curve.csv"))
+            .unwrap()
+            .lines()
+            .next()
     );
     assert_eq!(csv.lines().count(), 4);
     let system = json(&e.join("train_system.json"));
@@ -259,8 +267,8 @@ fn report_merges_external_and_builtin_runs_and_lists_failed_ones() {
         assert_eq!(inf.episodes, 7, "the config's inference.rollouts");
         assert!(inf.rollout_returns.iter().all(|r| *r > 0.9), "{inf:?}");
         assert!(inf.rollout_call_time_ms.count > 0);
-        let gen_ = a2perf_pipeline::generalize_run_with(&reg, &e, &mut source, Some(2), false)
-            .unwrap();
+        let gen_ =
+            a2perf_pipeline::generalize_run_with(&reg, &e, &mut source, Some(2), false).unwrap();
         assert_eq!(gen_.tasks.len(), 3);
         assert!(gen_.sum_of_mean_returns.is_some());
     }
@@ -270,8 +278,10 @@ fn report_merges_external_and_builtin_runs_and_lists_failed_ones() {
     run.log_evaluation(200, 0.1, 0.0).unwrap();
     let failed = run.dir().to_path_buf();
     assert_eq!(
-        run.finish(ExternalOutcome::Failed("ZeroDivisionError: division by zero".into()))
-            .unwrap(),
+        run.finish(ExternalOutcome::Failed(
+            "ZeroDivisionError: division by zero".into()
+        ))
+        .unwrap(),
         RunState::Failed
     );
     assert!(failed.join("curve.csv").is_file(), "logged points are kept");
@@ -289,10 +299,21 @@ fn report_merges_external_and_builtin_runs_and_lists_failed_ones() {
     .unwrap();
     let algos: Vec<&str> = report.groups.iter().map(|g| g.algorithm.as_str()).collect();
     assert_eq!(algos, ["my-agent", "random_search"]);
-    assert!(report.groups.iter().all(|g| g.task == "Corridor-v0[length=6]"));
+    assert!(
+        report
+            .groups
+            .iter()
+            .all(|g| g.task == "Corridor-v0[length=6]")
+    );
     let ext = &report.groups[0];
     assert_eq!(ext.seeds, [0, 1]);
-    for key in ["returns", "generalization", "energy", "peak_ram", "wall_clock"] {
+    for key in [
+        "returns",
+        "generalization",
+        "energy",
+        "peak_ram",
+        "wall_clock",
+    ] {
         assert!(ext.metric(key).unwrap().mean.is_some(), "{key}: {ext:?}");
     }
     let (dir, why) = report
@@ -318,7 +339,10 @@ fn report_merges_external_and_builtin_runs_and_lists_failed_ones() {
         })
         .unwrap();
     // Legends are upper-cased.
-    assert!(radar.contains("MY-AGENT") && radar.contains("RANDOM_SEARCH"), "{radar}");
+    assert!(
+        radar.contains("MY-AGENT") && radar.contains("RANDOM_SEARCH"),
+        "{radar}"
+    );
     assert!(!radar.contains("no radar"), "{radar}");
     let board = json(&out.join("leaderboard.json"));
     let entries = board["entries"].as_array().unwrap();
@@ -334,7 +358,10 @@ fn builtin_pipelines_refuse_external_runs_with_a_clear_error() {
     let err = a2perf_pipeline::infer_run(&reg, &e, &InferOptions::default())
         .unwrap_err()
         .to_string();
-    assert!(err.contains("external agent") && err.contains("a2perf_rs"), "{err}");
+    assert!(
+        err.contains("external agent") && err.contains("a2perf_rs"),
+        "{err}"
+    );
     let err = a2perf_pipeline::generalize_run(&reg, &e, Some(1), false).unwrap_err();
     assert!(err.to_string().contains("external agent"), "{err}");
     let err = a2perf_pipeline::collect::collect(
@@ -364,14 +391,20 @@ fn a_failing_policy_names_the_episode_and_step_and_writes_nothing() {
         panic!("expected a rollout error, got {err}");
     };
     assert!(*episode >= 1, "{err}");
-    assert!(err.to_string().contains(&format!("episode {episode}, step {step}")));
+    assert!(
+        err.to_string()
+            .contains(&format!("episode {episode}, step {step}"))
+    );
     assert!(err.to_string().contains("fails on purpose"), "{err}");
     assert!(!e.join("inference.json").exists());
-    assert_eq!(std::fs::read_to_string(&emissions).unwrap(), "earlier row\n");
+    assert_eq!(
+        std::fs::read_to_string(&emissions).unwrap(),
+        "earlier row\n"
+    );
 
     // Fatal errors stop generalization with nothing written; others are the task's failure.
-    let err = a2perf_pipeline::generalize_run_with(&reg, &e, &mut source, Some(3), false)
-        .unwrap_err();
+    let err =
+        a2perf_pipeline::generalize_run_with(&reg, &e, &mut source, Some(3), false).unwrap_err();
     assert!(matches!(err, PipelineError::Rollout { .. }), "{err}");
     assert!(!e.join("generalization.json").exists());
     let mut lenient = AgentPolicies::new(Some(9), false);
@@ -386,7 +419,9 @@ fn collect_reads_external_checkpoints_through_the_source() {
     let tmp = tempfile::tempdir().unwrap();
     let reg = common::registry();
     let cfg = config(tmp.path());
-    let runs: Vec<PathBuf> = (0..2).map(|s| train_external(tmp.path(), &cfg, s)).collect();
+    let runs: Vec<PathBuf> = (0..2)
+        .map(|s| train_external(tmp.path(), &cfg, s))
+        .collect();
     let mut source = AgentPolicies::new(None, true);
     let summary = a2perf_pipeline::collect::collect_with(
         &reg,
@@ -404,7 +439,12 @@ fn collect_reads_external_checkpoints_through_the_source() {
     .unwrap();
     assert_eq!(summary.evaluations.len(), 4);
     assert!(!summary.datasets.is_empty());
-    assert!(source.loaded.iter().all(|p| p.starts_with(tmp.path()) && p.is_file()));
+    assert!(
+        source
+            .loaded
+            .iter()
+            .all(|p| p.starts_with(tmp.path()) && p.is_file())
+    );
     for d in &summary.datasets {
         assert!(d.path.join("samples.json").is_file());
         assert!(d.training_sample_cost_kwh.is_some(), "{d:?}");
@@ -425,17 +465,23 @@ fn reruns_start_unfinished_external_runs_again_and_refuse_complete_ones() {
 
     // A run that logged nothing is marked failed, with an error; a rerun starts it afresh.
     std::fs::remove_dir_all(&dir).unwrap();
-    let mut run = ExternalRun::begin(&reg, plan.clone(), 0, agent(), &common::test_meters())
-        .unwrap();
+    let mut run =
+        ExternalRun::begin(&reg, plan.clone(), 0, agent(), &common::test_meters()).unwrap();
     let ckpt = tmp.path().join("c.bin");
     std::fs::write(&ckpt, b"x").unwrap();
     run.save_checkpoint(5, &ckpt).unwrap();
-    let err = run.finish(ExternalOutcome::Completed).unwrap_err().to_string();
+    let err = run
+        .finish(ExternalOutcome::Completed)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("logged no evaluation"), "{err}");
     assert_eq!(json(&dir.join("status.json"))["state"], "failed");
     assert!(dir.join("checkpoints").is_dir(), "kept");
     let run = ExternalRun::begin(&reg, plan, 0, agent(), &common::test_meters()).unwrap();
-    assert!(!dir.join("checkpoints").exists(), "a rerun starts from an empty directory");
+    assert!(
+        !dir.join("checkpoints").exists(),
+        "a rerun starts from an empty directory"
+    );
     assert_eq!(
         run.finish(ExternalOutcome::Interrupted("KeyboardInterrupt".into()))
             .unwrap(),
@@ -455,7 +501,10 @@ fn bad_requests_are_refused_naming_the_problem() {
         assert!(err.contains(want), "{want}: {err}");
     };
     check(&|s| s.algorithm = " ".into(), "give the agent a name");
-    check(&|s| s.algorithm = "random_search".into(), "built-in algorithm");
+    check(
+        &|s| s.algorithm = "random_search".into(),
+        "built-in algorithm",
+    );
     check(&|s| s.experiment = Some("a/b".into()), "experiment `a/b`");
     check(
         &|s| {
@@ -485,7 +534,10 @@ fn bad_requests_are_refused_naming_the_problem() {
         },
         "env_id",
     );
-    check(&|s| s.set = vec!["trainig.num_envs=2".into()], "did you mean `training`");
+    check(
+        &|s| s.set = vec!["trainig.num_envs=2".into()],
+        "did you mean `training`",
+    );
 
     let plan = external_plan(&reg, &spec(tmp.path(), &cfg, 0)).unwrap();
     let mut run = ExternalRun::begin(&reg, plan, 0, agent(), &common::test_meters()).unwrap();
@@ -554,7 +606,9 @@ impl Policy for Prepared {
         Ok(())
     }
     fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
-        Err(PolicyError::BadCheckpoint("saved by the agent's own code".into()))
+        Err(PolicyError::BadCheckpoint(
+            "saved by the agent's own code".into(),
+        ))
     }
 }
 

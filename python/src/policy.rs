@@ -147,8 +147,7 @@ impl Policy for PyPolicy {
 
     fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
         Err(PolicyError::BadCheckpoint(
-            "a Python policy is saved by the agent's own code (TrainingRun.save_checkpoint)"
-                .into(),
+            "a Python policy is saved by the agent's own code (TrainingRun.save_checkpoint)".into(),
         ))
     }
 }
@@ -243,15 +242,10 @@ impl PolicySource for LoaderPolicies<'_> {
             let with_info: bool = pair.get_item(1)?.extract()?;
             PyPolicy::new(py, callable, with_info, spec, self.errors.clone())
         });
-        loaded
-            .map(|p| Box::new(p) as Box<dyn Policy>)
-            .map_err(|e| {
-                keep(&self.errors, PolicyFailure::Raised(e));
-                PipelineError::Invalid(format!(
-                    "{}: load_policy failed",
-                    checkpoint.display()
-                ))
-            })
+        loaded.map(|p| Box::new(p) as Box<dyn Policy>).map_err(|e| {
+            keep(&self.errors, PolicyFailure::Raised(e));
+            PipelineError::Invalid(format!("{}: load_policy failed", checkpoint.display()))
+        })
     }
 
     fn errors_are_fatal(&self) -> bool {
@@ -272,7 +266,10 @@ fn relocated(py: Python<'_>, prefix: &str, failure: PolicyFailure, in_rollout: b
     let text = match (raised, in_rollout) {
         (true, true) => format!("{prefix}the policy raised {type_name}: {}", err.value(py)),
         (true, false) => format!("{prefix}{type_name}: {}", err.value(py)),
-        (false, _) => format!("{prefix}the policy returned an invalid action: {}", err.value(py)),
+        (false, _) => format!(
+            "{prefix}the policy returned an invalid action: {}",
+            err.value(py)
+        ),
     };
     // The same type when it can be built from a message (every built-in exception can).
     let new = ty
