@@ -38,6 +38,14 @@ pub trait Policy: Send {
     /// such as a policy living in another runtime converting the observation into that
     /// runtime's arrays (the original's environments returned them already converted). `act`
     /// must give the same action whether or not `prepare` was called. Default: nothing.
+    ///
+    /// ```
+    /// use a2perf_core::{ActMode, Observation, Policy, RandomPolicy, Space};
+    /// let mut p = RandomPolicy::new(Space::Discrete { n: 2 }, 0);
+    /// let obs = Observation::flat(vec![0.0]);
+    /// p.prepare(&obs).unwrap(); // a Rust policy has nothing to convert
+    /// assert!(p.act(&obs, ActMode::Greedy).is_ok());
+    /// ```
     fn prepare(&mut self, obs: &Observation) -> Result<(), PolicyError> {
         let _ = obs;
         Ok(())
