@@ -39,6 +39,24 @@ pub trait Policy: Send {
     /// may sample from the policy's own seeded stream.
     fn act(&mut self, obs: &Observation, mode: ActMode) -> Result<Action, PolicyError>;
 
+    /// Called by the inference benchmark with the observation the next `act` call gets, before
+    /// its timer starts: the place for work the original harness counted as the environment's,
+    /// such as a policy living in another runtime converting the observation into that
+    /// runtime's arrays (the original's environments returned them already converted). `act`
+    /// must give the same action whether or not `prepare` was called. Default: nothing.
+    ///
+    /// ```
+    /// use a2perf_core::{ActMode, Observation, Policy, RandomPolicy, Space};
+    /// let mut p = RandomPolicy::new(Space::Discrete { n: 2 }, 0);
+    /// let obs = Observation::flat(vec![0.0]);
+    /// p.prepare(&obs).unwrap(); // a Rust policy has nothing to convert
+    /// assert!(p.act(&obs, ActMode::Greedy).is_ok());
+    /// ```
+    fn prepare(&mut self, obs: &Observation) -> Result<(), PolicyError> {
+        let _ = obs;
+        Ok(())
+    }
+
     /// Serialises the policy so that the algorithm's loader can rebuild it.
     fn checkpoint(&self) -> Result<Checkpoint, PolicyError>;
 }
@@ -46,6 +64,9 @@ pub trait Policy: Send {
 impl<P: Policy + ?Sized> Policy for Box<P> {
     fn act(&mut self, obs: &Observation, mode: ActMode) -> Result<Action, PolicyError> {
         (**self).act(obs, mode)
+    }
+    fn prepare(&mut self, obs: &Observation) -> Result<(), PolicyError> {
+        (**self).prepare(obs)
     }
     fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
         (**self).checkpoint()

@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use a2perf_core::{
-    ActMode, Action, LearningCurve, Observation, Registry, RngStream, results::read_json, rollout,
+    ActMode, Action, LearningCurve, Observation, Registry, RngStream, results::read_json,
     write_json_atomic,
 };
 use serde::{Deserialize, Serialize};
@@ -26,8 +26,8 @@ use serde::{Deserialize, Serialize};
 use super::stats::Summary;
 use super::train::PhaseSystem;
 use super::{
-    CHECKPOINT_DIR, CURVE_JSON, LoadedRun, PipelineError, Result, TRAIN_SYSTEM_FILE,
-    load_checkpoint_policy, progress,
+    CHECKPOINT_DIR, CURVE_JSON, LoadedRun, PipelineError, PolicySource, RegistryPolicies, Result,
+    TRAIN_SYSTEM_FILE, located_rollout, progress,
 };
 
 /// How a checkpoint's training sample cost is assigned.
@@ -283,21 +283,36 @@ pub fn collect(
     out: &Path,
     opts: &CollectOptions,
 ) -> Result<CollectSummary> {
+    collect_with(registry, runs, out, &mut RegistryPolicies(registry), opts)
+}
+
+/// [`collect`] with every checkpoint's policy taken from `policies` (for external agents, a
+/// front end's loader of their own checkpoint files; see [`PolicySource`]). A rollout error
+/// names the checkpoint, the episode and the step.
+pub fn collect_with(
+    registry: &Registry,
+    runs: &[PathBuf],
+    out: &Path,
+    policies: &mut dyn PolicySource,
+    opts: &CollectOptions,
+) -> Result<CollectSummary> {
     collect_levels(
         registry,
         runs,
         out,
+        policies,
         opts,
         &[Level::Novice, Level::Intermediate, Level::Expert],
     )
 }
 
-/// [`collect`], writing only the datasets of `levels` (every checkpoint is still evaluated and
-/// levelled: the levels depend on all of them).
+/// [`collect_with`], writing only the datasets of `levels` (every checkpoint is still evaluated
+/// and levelled: the levels depend on all of them).
 pub fn collect_levels(
     registry: &Registry,
     runs: &[PathBuf],
     out: &Path,
+    policies: &mut dyn PolicySource,
     opts: &CollectOptions,
     levels: &[Level],
 ) -> Result<CollectSummary> {
@@ -340,15 +355,19 @@ pub fn collect_levels(
         );
         let mut evals = Vec::with_capacity(ckpts.len());
         for (step, path) in &ckpts {
-            let mut policy = load_checkpoint_policy(registry, path, &spec)?;
+            let mut policy = policies.policy(&run, path, &spec)?;
             let mut returns = Vec::with_capacity(opts.eval_episodes);
             for i in 0..opts.eval_episodes {
                 let seed = seeds.derive_index(i as u64).next_u64();
-                let ep = rollout(env.as_mut(), policy.as_mut(), seed, ActMode::Greedy, false)
-                    .map_err(|source| PipelineError::Run {
-                        run: path.display().to_string(),
-                        source,
-                    })?;
+                let ep = located_rollout(
+                    env.as_mut(),
+                    policy.as_mut(),
+                    seed,
+                    ActMode::Greedy,
+                    false,
+                    i,
+                    || path.display().to_string(),
+                )?;
                 returns.push(ep.episode_return);
                 bar.inc(1);
             }
@@ -407,7 +426,17 @@ pub fn collect_levels(
                 summary.empty_levels.push((task.clone(), level));
                 continue;
             }
-            let info = write_dataset(registry, first, &task, level, &pool, out, opts, [mu, sigma])?;
+            let info = write_dataset(
+                registry,
+                policies,
+                first,
+                &task,
+                level,
+                &pool,
+                out,
+                opts,
+                [mu, sigma],
+            )?;
             summary.datasets.push(info);
         }
         for (_, evals) in entries {
@@ -420,6 +449,7 @@ pub fn collect_levels(
 #[allow(clippy::too_many_arguments)]
 fn write_dataset(
     registry: &Registry,
+    source: &mut dyn PolicySource,
     run: &LoadedRun,
     task: &str,
     level: Level,
@@ -458,17 +488,18 @@ fn write_dataset(
         let seed = rng.next_u64();
         let policy = match policies.entry(k) {
             std::collections::btree_map::Entry::Occupied(o) => o.into_mut(),
-            std::collections::btree_map::Entry::Vacant(v) => v.insert(load_checkpoint_policy(
-                registry,
-                &pool[k].1.checkpoint,
-                &spec,
-            )?),
+            std::collections::btree_map::Entry::Vacant(v) => {
+                v.insert(source.policy(pool[k].0, &pool[k].1.checkpoint, &spec)?)
+            }
         };
-        let ep = rollout(env.as_mut(), policy.as_mut(), seed, ActMode::Explore, true).map_err(
-            |source| PipelineError::Run {
-                run: pool[k].1.checkpoint.display().to_string(),
-                source,
-            },
+        let ep = located_rollout(
+            env.as_mut(),
+            policy.as_mut(),
+            seed,
+            ActMode::Explore,
+            true,
+            e,
+            || pool[k].1.checkpoint.display().to_string(),
         )?;
         returns.push(ep.episode_return);
         let record = super::minari::EpisodeRecord {

@@ -5,11 +5,14 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use a2perf_core::{ActMode, Registry, RngStream, Value, rollout, write_json_atomic};
+use a2perf_core::{ActMode, Registry, RngStream, Value, write_json_atomic};
 use serde::{Deserialize, Serialize};
 
 use super::plan::{GeneralizationTask, SuiteSource};
-use super::{GENERALIZATION_FILE, LoadedRun, PipelineError, Result, progress};
+use super::{
+    GENERALIZATION_FILE, LoadedRun, POLICY_FILE, PipelineError, PolicySource, RegistryPolicies,
+    Result, located_rollout, progress,
+};
 
 /// Result on one task of the suite.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -55,6 +58,29 @@ pub fn generalize_run(
     episodes: Option<usize>,
     show_progress: bool,
 ) -> Result<GeneralizationResults> {
+    // Refused up front: per task, the refusal would only be recorded as every task's failure.
+    LoadedRun::open(dir)?.require_builtin("generalize")?;
+    generalize_run_with(
+        registry,
+        dir,
+        &mut RegistryPolicies(registry),
+        episodes,
+        show_progress,
+    )
+}
+
+/// [`generalize_run`] with the policy for each task taken from `policies` (for an external
+/// agent, a front end's policy; see [`PolicySource`]). A task whose policy or rollout fails is
+/// recorded as failed (its `error`) and the others go on — unless the source's errors are
+/// fatal: then the rollout error (naming the task, episode and step) is returned and nothing is
+/// written.
+pub fn generalize_run_with(
+    registry: &Registry,
+    dir: &Path,
+    policies: &mut dyn PolicySource,
+    episodes: Option<usize>,
+    show_progress: bool,
+) -> Result<GeneralizationResults> {
     let run = LoadedRun::open(dir)?;
     run.require_complete()?;
     let episodes = episodes.unwrap_or(run.record.generalization.episodes);
@@ -96,16 +122,20 @@ pub fn generalize_run(
         let outcome = (|| -> Result<Vec<f64>> {
             let mut env = registry.make_env(&task.env_id, &task.params)?;
             let spec = env.spec().clone();
-            let mut policy = run.load_policy(registry, &spec)?;
+            let mut policy = policies.policy(&run, &dir.join(POLICY_FILE), &spec)?;
             let seeds = RngStream::new(run.record.seed, &format!("generalization/{}", task.name));
             let mut returns = Vec::with_capacity(episodes);
             for i in 0..episodes {
                 let seed = seeds.derive_index(i as u64).next_u64();
-                let ep = rollout(env.as_mut(), policy.as_mut(), seed, ActMode::Greedy, false)
-                    .map_err(|source| PipelineError::Run {
-                        run: format!("{} on {}", dir.display(), task.name),
-                        source,
-                    })?;
+                let ep = located_rollout(
+                    env.as_mut(),
+                    policy.as_mut(),
+                    seed,
+                    ActMode::Greedy,
+                    false,
+                    i,
+                    || format!("{} on {}", dir.display(), task.name),
+                )?;
                 returns.push(ep.episode_return);
                 bar.inc(1);
             }
@@ -116,6 +146,10 @@ pub fn generalize_run(
             Ok(returns) => {
                 result.mean_return = Some(returns.iter().sum::<f64>() / returns.len() as f64);
                 result.returns = returns;
+            }
+            Err(e @ PipelineError::Rollout { .. }) if policies.errors_are_fatal() => {
+                bar.finish_and_clear();
+                return Err(e);
             }
             Err(e) => result.error = Some(e.to_string()),
         }

@@ -4,14 +4,19 @@ use std::path::Path;
 use std::time::Instant;
 
 use a2perf_core::{
-    ActMode, Env, Observation, Policy, Registry, RngStream, Space, Step, Tensor, write_json_atomic,
+    ActMode, Env, Observation, Policy, Registry, RngStream, Space, Step, Tensor, write_atomic,
+    write_json_atomic,
 };
 use serde::{Deserialize, Serialize};
 
+use super::meters::INFERENCE_EMISSIONS_FILE;
 use super::plan::ObservationSource;
 use super::stats::Summary;
 use super::train::{MeterFactory, Phase, PhaseSystem, measured, no_meters};
-use super::{INFERENCE_FILE, LoadedRun, PipelineError, Result, progress};
+use super::{
+    INFERENCE_FILE, LoadedRun, POLICY_FILE, PipelineError, PolicySource, RegistryPolicies, Result,
+    io_err, progress,
+};
 
 /// Options of [`infer_run`]; `None` fields take the run's recorded settings.
 #[derive(Clone)]
@@ -113,6 +118,20 @@ pub fn random_observation(
 
 /// Runs the inference benchmark on a complete run directory and writes `inference.json`.
 pub fn infer_run(registry: &Registry, dir: &Path, opts: &InferOptions) -> Result<InferenceResults> {
+    infer_run_with(registry, dir, &mut RegistryPolicies(registry), opts)
+}
+
+/// [`infer_run`] with the run's final policy taken from `policies` (for an external agent, a
+/// front end's policy; see [`PolicySource`]). Every `act` call is timed the same way (after the
+/// policy's [`Policy::prepare`](a2perf_core::Policy::prepare), outside the timer). A failed
+/// rollout (an error naming its episode and step) writes nothing: no `inference.json`, and the
+/// meters' `inference_emissions.csv` is left as it was.
+pub fn infer_run_with(
+    registry: &Registry,
+    dir: &Path,
+    policies: &mut dyn PolicySource,
+    opts: &InferOptions,
+) -> Result<InferenceResults> {
     let run = LoadedRun::open(dir)?;
     run.require_complete()?;
     let episodes = opts.episodes.unwrap_or(run.record.inference.episodes);
@@ -133,11 +152,9 @@ pub fn infer_run(registry: &Registry, dir: &Path, opts: &InferOptions) -> Result
     };
     let mut env = run.make_env(registry)?;
     let spec = env.spec().clone();
-    let mut policy = run.load_policy(registry, &spec)?;
-    let run_err = |source: a2perf_core::RunError| PipelineError::Run {
-        run: dir.display().to_string(),
-        source,
-    };
+    let mut policy = policies.policy(&run, &dir.join(POLICY_FILE), &spec)?;
+    let emissions = dir.join(INFERENCE_EMISSIONS_FILE);
+    let emissions_before = std::fs::read(&emissions).ok();
 
     let seeds = RngStream::new(run.record.seed, "inference/episodes");
     let bar = progress::bar(episodes as u64, "infer", opts.show_progress);
@@ -149,7 +166,12 @@ pub fn infer_run(registry: &Registry, dir: &Path, opts: &InferOptions) -> Result
         for i in 0..episodes {
             let seed = seeds.derive_index(i as u64).next_u64();
             let (ret, len) = timed_rollout(env.as_mut(), policy.as_mut(), seed, &mut times_ms)
-                .map_err(run_err)?;
+                .map_err(|(step, source)| PipelineError::Rollout {
+                    run: dir.display().to_string(),
+                    episode: i,
+                    step,
+                    source,
+                })?;
             returns.push(ret);
             lengths.push(len);
             bar.inc(1);
@@ -157,67 +179,99 @@ pub fn infer_run(registry: &Registry, dir: &Path, opts: &InferOptions) -> Result
         Ok((returns, lengths, times_ms))
     });
     bar.finish_and_clear();
-    let (returns, lengths, times_ms) = rollouts?;
     let _ = env.close();
-
-    let mut random_failures = 0;
-    let random_time = (random_n > 0).then(|| {
-        let action_n = match spec.action_space {
-            Space::Discrete { n } => Some(n),
-            _ => None,
-        };
-        let mut rng = RngStream::new(run.record.seed, "inference/random-observations");
-        // Sampled before timing, as the original did, so only the call itself is measured.
-        let samples: Vec<Observation> = (0..random_n)
-            .map(|_| random_observation(&spec.observation_space, action_n, &mut rng))
-            .collect();
-        let mut times = Vec::with_capacity(random_n);
-        for obs in &samples {
-            let t = Instant::now();
-            let r = policy.act(obs, ActMode::Greedy);
-            let dt = t.elapsed().as_secs_f64() * 1e3;
-            match r {
-                Ok(_) => times.push(dt),
-                Err(_) => random_failures += 1,
+    let fatal = policies.errors_are_fatal();
+    let finished = rollouts.and_then(|(returns, lengths, times_ms)| {
+        let mut random_failures = 0;
+        let random_time = if random_n > 0 {
+            let action_n = match spec.action_space {
+                Space::Discrete { n } => Some(n),
+                _ => None,
+            };
+            let mut rng = RngStream::new(run.record.seed, "inference/random-observations");
+            // Sampled before timing, as the original did, so only the call itself is measured.
+            let samples: Vec<Observation> = (0..random_n)
+                .map(|_| random_observation(&spec.observation_space, action_n, &mut rng))
+                .collect();
+            let mut times = Vec::with_capacity(random_n);
+            for (k, obs) in samples.iter().enumerate() {
+                let r = policy.prepare(obs).and_then(|()| {
+                    let t = Instant::now();
+                    policy.act(obs, ActMode::Greedy).map(|_| t.elapsed())
+                });
+                let dt = r.as_ref().map_or(0.0, |d| d.as_secs_f64() * 1e3);
+                match r {
+                    Ok(_) => times.push(dt),
+                    Err(e) if fatal => {
+                        return Err(PipelineError::Run {
+                            run: format!(
+                                "{} (timing call {k} on a random observation)",
+                                dir.display()
+                            ),
+                            source: e.into(),
+                        });
+                    }
+                    Err(_) => random_failures += 1,
+                }
             }
-        }
-        Summary::of(&times)
+            Some(Summary::of(&times))
+        } else {
+            None
+        };
+        let rollout_time = Summary::of(&times_ms);
+        let results = InferenceResults {
+            episodes,
+            returns: Summary::of(&returns),
+            rollout_returns: returns,
+            episode_lengths: lengths,
+            inference_time_ms: random_time.clone().unwrap_or_else(|| rollout_time.clone()),
+            observation_source: source,
+            rollout_call_time_ms: rollout_time,
+            random_observation_time_ms: random_time,
+            random_observation_failures: random_failures,
+            system,
+        };
+        write_json_atomic(&dir.join(INFERENCE_FILE), &results)?;
+        Ok(results)
     });
-
-    let rollout_time = Summary::of(&times_ms);
-    let results = InferenceResults {
-        episodes,
-        returns: Summary::of(&returns),
-        rollout_returns: returns,
-        episode_lengths: lengths,
-        inference_time_ms: random_time.clone().unwrap_or_else(|| rollout_time.clone()),
-        observation_source: source,
-        rollout_call_time_ms: rollout_time,
-        random_observation_time_ms: random_time,
-        random_observation_failures: random_failures,
-        system,
-    };
-    write_json_atomic(&dir.join(INFERENCE_FILE), &results)?;
-    Ok(results)
+    if finished.is_err() {
+        // The meters appended a row for the failed phase; the run keeps its earlier file.
+        match &emissions_before {
+            Some(bytes) => write_atomic(&emissions, bytes).map_err(io_err(&emissions))?,
+            None if emissions.exists() => {
+                std::fs::remove_file(&emissions).map_err(io_err(&emissions))?
+            }
+            None => {}
+        }
+    }
+    finished
 }
 
-/// One greedy episode, timing every `act` call (milliseconds appended to `times_ms`).
+/// One greedy episode, timing every `act` call (milliseconds appended to `times_ms`; the
+/// policy's `prepare` is not timed). An error comes with the step it happened at.
 fn timed_rollout(
     env: &mut dyn Env,
     policy: &mut dyn Policy,
     seed: u64,
     times_ms: &mut Vec<f64>,
-) -> std::result::Result<(f64, usize), a2perf_core::RunError> {
+) -> std::result::Result<(f64, usize), (usize, a2perf_core::RunError)> {
     let limit = env.spec().max_episode_steps.unwrap_or(usize::MAX);
     let mut step = Step::default();
-    env.reset_into(Some(seed), &mut step.observation)?;
+    env.reset_into(Some(seed), &mut step.observation)
+        .map_err(|e| (0, e.into()))?;
     let mut ret = 0.0;
     let mut len = 0usize;
     loop {
+        policy
+            .prepare(&step.observation)
+            .map_err(|e| (len, e.into()))?;
         let t = Instant::now();
-        let action = policy.act(&step.observation, ActMode::Greedy)?;
+        let action = policy
+            .act(&step.observation, ActMode::Greedy)
+            .map_err(|e| (len, e.into()))?;
         times_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        env.step_into(&action, &mut step)?;
+        env.step_into(&action, &mut step)
+            .map_err(|e| (len, e.into()))?;
         ret += step.reward;
         len += 1;
         if step.terminated || step.truncated || len >= limit {

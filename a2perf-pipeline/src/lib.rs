@@ -10,7 +10,9 @@
 //! - [`generalize_run`]: returns on every task of the domain's generalization suite;
 //! - [`collect`]: checkpoint evaluation, expertise levels and offline datasets;
 //! - [`report`]: the paper's four-category tables, plots and a leaderboard entry;
-//! - [`run_experiments`]: all of the above in order, skipping what is already on disk.
+//! - [`run_experiments`]: all of the above in order, skipping what is already on disk;
+//! - [`external`]: runs trained outside the benchmark's algorithms (a Python agent), recorded
+//!   like built-in ones and rolled out through a [`PolicySource`].
 //!
 //! ```
 //! use a2perf_pipeline::Shard;
@@ -57,6 +59,7 @@ use serde::{Deserialize, Serialize};
 
 pub mod arrow;
 pub mod collect;
+pub mod external;
 pub mod generalize;
 pub mod infer;
 pub mod meters;
@@ -70,8 +73,8 @@ pub mod stats;
 pub mod sysinfo;
 pub mod train;
 
-pub use generalize::{GeneralizationResults, generalize_run};
-pub use infer::{InferOptions, InferenceResults, infer_run};
+pub use generalize::{GeneralizationResults, generalize_run, generalize_run_with};
+pub use infer::{InferOptions, InferenceResults, infer_run, infer_run_with};
 pub use plan::{
     AlgorithmSpec, ExperimentPlan, GeneralizationSettings, GeneralizationSuite, GeneralizationTask,
     InferenceSettings, LoadedPlans, MetricSettings, ObservationSource, ProfileRecord,
@@ -136,6 +139,19 @@ pub enum PipelineError {
     Run {
         /// The run directory.
         run: String,
+        /// The error.
+        source: RunError,
+    },
+    /// A rollout failed: the policy or the environment returned an error in this episode at
+    /// this step (both counted from 0).
+    #[error("{run}: episode {episode}, step {step} (counted from 0): {source}")]
+    Rollout {
+        /// The run directory (and the task, for generalization).
+        run: String,
+        /// Episode index.
+        episode: usize,
+        /// Step index within the episode (the policy call that failed, or the step after it).
+        step: usize,
         /// The error.
         source: RunError,
     },
@@ -223,6 +239,22 @@ pub struct RunRecord {
     /// For offline algorithms: the dataset and its sample cost.
     #[serde(default)]
     pub dataset: Option<DatasetProvenance>,
+    /// For runs trained outside the benchmark's algorithms (a Python agent through
+    /// `a2perf_rs.TrainingRun`, see [`external`]): who trained it. Absent for built-in runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub external: Option<ExternalAgent>,
+}
+
+/// An agent trained outside the benchmark's algorithms, as recorded in `run.json`: its policy
+/// lives in the agent's own code and checkpoint format, so the pipelines roll it out through a
+/// [`PolicySource`] its front end gives them (e.g. a Python callable), never through the
+/// registry's checkpoint loaders.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExternalAgent {
+    /// The harness that recorded the run (`a2perf_rs.TrainingRun`).
+    pub harness: String,
+    /// The agent's language and runtime (`CPython 3.11.7`), as the front end describes it.
+    pub runtime: String,
 }
 
 /// Current layout version of [`RunRecord`].
@@ -293,7 +325,36 @@ impl LoadedRun {
 
     /// Loads the final policy for an environment with `spec`.
     pub fn load_policy(&self, registry: &Registry, spec: &EnvSpec) -> Result<Box<dyn Policy>> {
-        load_checkpoint_policy(registry, &self.dir.join(POLICY_FILE), spec)
+        RegistryPolicies(registry).policy(self, &self.dir.join(POLICY_FILE), spec)
+    }
+
+    /// Fails for a run trained by an external agent, whose checkpoints only its own code reads.
+    pub fn require_builtin(&self, what: &str) -> Result<()> {
+        match &self.record.external {
+            None => Ok(()),
+            Some(agent) => Err(PipelineError::Invalid(format!(
+                "{}: trained by an external agent ({}, {}); its checkpoints are in the agent's \
+                 own format, so {what} needs the agent's policy: from Python, \
+                 a2perf_rs.infer / generalize / collect with a policy callable or loader",
+                self.dir.display(),
+                agent.harness,
+                agent.runtime
+            ))),
+        }
+    }
+
+    /// Fails for a run trained by a built-in algorithm (its results belong to that algorithm's
+    /// policy, not to one given by a front end).
+    pub fn require_external(&self, what: &str) -> Result<()> {
+        if self.record.external.is_some() {
+            return Ok(());
+        }
+        Err(PipelineError::Invalid(format!(
+            "{}: trained by the built-in algorithm `{}`, not by an external agent; {what} it \
+             with the `a2perf` command (or the pipeline with the registry's policies)",
+            self.dir.display(),
+            self.record.algorithm.name
+        )))
     }
 
     /// Short name of the run (its directory name).
@@ -302,6 +363,49 @@ impl LoadedRun {
             || self.dir.display().to_string(),
             |n| n.to_string_lossy().into(),
         )
+    }
+}
+
+/// Where a pipeline gets the policies it rolls out: the registry's checkpoint loaders for the
+/// benchmark's own algorithms ([`RegistryPolicies`]), or a front end's policies for an external
+/// agent (the Python package's callables). [`infer::infer_run_with`],
+/// [`generalize::generalize_run_with`] and [`collect::collect_with`] take one.
+pub trait PolicySource {
+    /// The policy of `run` saved in `checkpoint` (its `policy.ckpt` or one of
+    /// `checkpoints/step_*.ckpt`), for an environment with `spec`.
+    fn policy(
+        &mut self,
+        run: &LoadedRun,
+        checkpoint: &Path,
+        spec: &EnvSpec,
+    ) -> Result<Box<dyn Policy>>;
+
+    /// Whether an error of one of its policies stops the phase with that error (an exception in
+    /// a user's code) rather than being recorded as that generalization task's failure (the
+    /// benchmark's networks on an observation they do not fit).
+    fn errors_are_fatal(&self) -> bool {
+        false
+    }
+}
+
+/// The benchmark's checkpoints, rebuilt by the registry's loaders.
+///
+/// ```
+/// use a2perf_pipeline::{PolicySource, RegistryPolicies};
+/// let reg = a2perf_pipeline::registry::full_registry();
+/// assert!(!RegistryPolicies(&reg).errors_are_fatal());
+/// ```
+pub struct RegistryPolicies<'a>(pub &'a Registry);
+
+impl PolicySource for RegistryPolicies<'_> {
+    fn policy(
+        &mut self,
+        run: &LoadedRun,
+        checkpoint: &Path,
+        spec: &EnvSpec,
+    ) -> Result<Box<dyn Policy>> {
+        run.require_builtin("rolling it out")?;
+        load_checkpoint_policy(self.0, checkpoint, spec)
     }
 }
 
@@ -320,6 +424,50 @@ pub fn load_checkpoint_policy(
     (entry.load_policy)(&ckpt, spec).map_err(|e| PipelineError::Corrupt {
         path: path.to_path_buf(),
         reason: e.to_string(),
+    })
+}
+
+/// A policy that counts its calls, so that a failed rollout can say at which step it failed.
+struct CountedPolicy<'a> {
+    inner: &'a mut dyn Policy,
+    calls: usize,
+}
+
+impl Policy for CountedPolicy<'_> {
+    fn act(
+        &mut self,
+        obs: &a2perf_core::Observation,
+        mode: a2perf_core::ActMode,
+    ) -> std::result::Result<a2perf_core::Action, a2perf_core::PolicyError> {
+        self.calls += 1;
+        self.inner.act(obs, mode)
+    }
+    fn checkpoint(&self) -> std::result::Result<Checkpoint, a2perf_core::PolicyError> {
+        self.inner.checkpoint()
+    }
+}
+
+/// [`a2perf_core::rollout`] whose error names the run (`run()`), the episode and the step.
+pub(crate) fn located_rollout(
+    env: &mut dyn Env,
+    policy: &mut dyn Policy,
+    seed: u64,
+    mode: a2perf_core::ActMode,
+    record: bool,
+    episode: usize,
+    run: impl FnOnce() -> String,
+) -> Result<a2perf_core::Episode> {
+    let mut counted = CountedPolicy {
+        inner: policy,
+        calls: 0,
+    };
+    a2perf_core::rollout(env, &mut counted, seed, mode, record).map_err(|source| {
+        PipelineError::Rollout {
+            run: run(),
+            episode,
+            step: counted.calls.saturating_sub(1),
+            source,
+        }
     })
 }
 

@@ -13,6 +13,11 @@ use a2perf_metrics::system::{SystemMeter, SystemMeterConfig, append_emissions_cs
 use super::plan::MetricSettings;
 use super::train::{MeterFactory, Phase};
 
+/// The CodeCarbon-style row of each training segment, in the run directory.
+pub const TRAIN_EMISSIONS_FILE: &str = "train_emissions.csv";
+/// The CodeCarbon-style row of each `infer`, in the run directory.
+pub const INFERENCE_EMISSIONS_FILE: &str = "inference_emissions.csv";
+
 /// A [`SystemMeter`] that writes its emissions row next to the run's results when it finishes.
 pub struct RunSystemMeter {
     inner: SystemMeter,
@@ -48,8 +53,8 @@ impl RunSystemMeter {
             cfg.powercap_root = dir.join(".no-rapl");
         }
         let name = match phase {
-            Phase::Train => "train_emissions.csv",
-            Phase::Inference => "inference_emissions.csv",
+            Phase::Train => TRAIN_EMISSIONS_FILE,
+            Phase::Inference => INFERENCE_EMISSIONS_FILE,
         };
         Self {
             inner: SystemMeter::new(cfg),

@@ -123,8 +123,14 @@ pub fn collect_dataset(
         let level = source.step.level()?;
         let mut opts = source.step.collect_options()?;
         opts.show_progress = show_progress;
-        let summary =
-            crate::collect::collect_levels(registry, &source.runs, &source.out, &opts, &[level])?;
+        let summary = crate::collect::collect_levels(
+            registry,
+            &source.runs,
+            &source.out,
+            &mut crate::RegistryPolicies(registry),
+            &opts,
+            &[level],
+        )?;
         if !summary.datasets.iter().any(|d| d.level == level) {
             return Err(PipelineError::Invalid(format!(
                 "experiment `{}`: no checkpoint of {} reached the `{}` level, so there is no \

@@ -13,13 +13,13 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use a2perf_core::{
-    CancelToken, DirectoryCheckpoints, Measurement, Meter, MeterReport, MeterSet, Provenance,
-    Registry, ResumeDir, ResumePoint, ResumeWrite, RunDir, RunError, RunState, TrainingContext,
-    write_atomic, write_json_atomic,
+    CancelToken, DirectoryCheckpoints, LearningCurve, Measurement, Meter, MeterReport, MeterSet,
+    Provenance, Registry, ResumeDir, ResumePoint, ResumeWrite, RunDir, RunError, RunState,
+    TrainingContext, write_atomic, write_json_atomic,
 };
 use serde::{Deserialize, Serialize};
 
-use super::plan::{MetricSettings, RunJob};
+use super::plan::{ExperimentPlan, MetricSettings, RunJob};
 use super::{
     CHECKPOINT_DIR, CURVE_CSV, CURVE_JSON, OPERATIVE_FILE, POLICY_FILE, PipelineError, RESUME_DIR,
     RUN_FILE, RUN_FORMAT_VERSION, Result, RunRecord, SYSTEM_INFO_FILE, SystemInfo,
@@ -353,42 +353,81 @@ impl Drop for ActiveRun {
     }
 }
 
-/// Runs `f` between the start and the finish of `meters`, recording wall-clock time. Meter
-/// failures are recorded, not fatal: a missing figure is reported as missing.
-pub(crate) fn measured<T>(meters: Vec<Box<dyn Meter>>, f: impl FnOnce() -> T) -> (T, PhaseSystem) {
-    let mut set = MeterSet::new(meters);
-    let mut errors = Vec::new();
-    let mut active = ActiveRun::enter();
-    let started_ok = match set.start() {
-        Ok(()) => true,
-        Err(e) => {
-            errors.push(e.to_string());
-            false
+/// System meters running over a phase that is not one closure call — a front end's block of
+/// code, such as Python's `with a2perf_rs.TrainingRun(...)` — from [`start`](Self::start) to
+/// [`finish`](Self::finish), with the phase's wall-clock time. Meter failures are recorded, not
+/// fatal: a missing figure is reported as missing. The phase counts as an active run of this
+/// process while it lasts (see [`PhaseSystem::concurrent_runs`]).
+///
+/// ```
+/// use a2perf_pipeline::train::MeteredPhase;
+/// let phase = MeteredPhase::start(Vec::new());
+/// let system = phase.finish();
+/// assert!(system.wall_clock_s >= 0.0 && system.meter_errors.is_empty());
+/// assert!(system.concurrent_runs >= 1);
+/// ```
+pub struct MeteredPhase {
+    set: MeterSet,
+    errors: Vec<String>,
+    active: ActiveRun,
+    started_ok: bool,
+    started: Instant,
+}
+
+impl MeteredPhase {
+    /// Starts `meters` and the clock.
+    pub fn start(meters: Vec<Box<dyn Meter>>) -> Self {
+        let mut set = MeterSet::new(meters);
+        let mut errors = Vec::new();
+        let active = ActiveRun::enter();
+        let started_ok = match set.start() {
+            Ok(()) => true,
+            Err(e) => {
+                errors.push(e.to_string());
+                false
+            }
+        };
+        Self {
+            set,
+            errors,
+            active,
+            started_ok,
+            started: Instant::now(),
         }
-    };
-    let t = Instant::now();
-    let out = f();
-    let wall = t.elapsed().as_secs_f64();
-    let meters = if started_ok {
-        set.finish().unwrap_or_else(|e| {
-            errors.push(e.to_string());
+    }
+
+    /// Seconds since [`start`](Self::start).
+    pub fn elapsed_s(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+
+    /// Stops the clock and the meters and returns what they measured.
+    pub fn finish(mut self) -> PhaseSystem {
+        let wall = self.elapsed_s();
+        let meters = if self.started_ok {
+            self.set.finish().unwrap_or_else(|e| {
+                self.errors.push(e.to_string());
+                MeterReport::default()
+            })
+        } else {
             MeterReport::default()
-        })
-    } else {
-        MeterReport::default()
-    };
-    let concurrent_runs = active.observe();
-    (
-        out,
+        };
         PhaseSystem {
             wall_clock_s: wall,
-            concurrent_runs,
+            concurrent_runs: self.active.observe(),
             meters,
-            meter_errors: errors,
+            meter_errors: self.errors,
             segments: 1,
             note: None,
-        },
-    )
+        }
+    }
+}
+
+/// Runs `f` between the start and the finish of `meters` (see [`MeteredPhase`]).
+pub(crate) fn measured<T>(meters: Vec<Box<dyn Meter>>, f: impl FnOnce() -> T) -> (T, PhaseSystem) {
+    let phase = MeteredPhase::start(meters);
+    let out = f();
+    (out, phase.finish())
 }
 
 /// Checks that every experiment names a known environment and algorithm with valid parameters,
@@ -497,7 +536,7 @@ pub struct RunReport {
 }
 
 /// How a run directory is to be trained.
-enum Start {
+pub(crate) enum Start {
     /// Already complete.
     Skip,
     /// From nothing (the directory is new or was emptied).
@@ -506,7 +545,7 @@ enum Start {
     Resume(Box<ResumePoint>, TrainSegments),
 }
 
-fn wipe(run: &RunDir) -> Result<()> {
+pub(crate) fn wipe(run: &RunDir) -> Result<()> {
     let path = run.path();
     std::fs::remove_dir_all(path).map_err(io_err(path))?;
     Ok(())
@@ -515,7 +554,11 @@ fn wipe(run: &RunDir) -> Result<()> {
 /// Decides how to train `run`, given the record it would get: skip it (complete), continue it
 /// from its newest valid resume point, or start it from an empty directory (new, never
 /// resumable, or made with another configuration; stale checkpoints must not mix in).
-fn prepare(run: &RunDir, record_json: &[u8], warnings: &mut Vec<String>) -> Result<Start> {
+pub(crate) fn prepare(
+    run: &RunDir,
+    record_json: &[u8],
+    warnings: &mut Vec<String>,
+) -> Result<Start> {
     let path = run.path();
     if path.exists() {
         match run.status()? {
@@ -595,6 +638,117 @@ fn remove_checkpoints_after(run: &RunDir, step: u64) -> Result<()> {
     Ok(())
 }
 
+/// What a run is — its `run.json` record, with the exact bytes written — and the environment
+/// its training uses.
+pub(crate) struct PlannedRun {
+    /// The record.
+    pub(crate) record: RunRecord,
+    /// `record` as `run.json` holds it.
+    pub(crate) record_json: Vec<u8>,
+    /// The task's environment.
+    pub(crate) env: a2perf_core::EnvEntry,
+    /// Its parameters, resolved.
+    pub(crate) env_params: a2perf_core::Params,
+}
+
+impl PlannedRun {
+    /// The record of `job` trained by `algorithm` (hyperparameters resolved): the task's
+    /// parameters resolved and the environment's provenance read from a probe instance.
+    /// `external` marks a run trained outside the benchmark's algorithms.
+    pub(crate) fn new(
+        registry: &Registry,
+        job: &RunJob,
+        algorithm: super::AlgorithmSpec,
+        external: Option<super::ExternalAgent>,
+    ) -> Result<Self> {
+        let plan = &job.plan;
+        let env = registry.env(&plan.task.env_id)?.clone();
+        let env_params = registry.env_params(&plan.task.env_id, &plan.task.env_params)?;
+        let probe = (env.make)(&env_params).map_err(|source| a2perf_core::RegistryError::Env {
+            id: plan.task.env_id.clone(),
+            source,
+        })?;
+        let env_metadata = probe.spec().metadata.clone();
+        drop(probe);
+        let mut task = plan.task.clone();
+        task.env_params = env_params.values().clone();
+        let record = RunRecord {
+            format_version: RUN_FORMAT_VERSION,
+            experiment: plan.name.clone(),
+            task,
+            domain: env.domain.clone(),
+            algorithm,
+            seed: job.seed,
+            training: plan.training.clone(),
+            inference: plan.inference.clone(),
+            generalization: plan.generalization.clone(),
+            metrics: plan.metrics.clone(),
+            env_metadata,
+            dataset: plan.dataset.clone(),
+            external,
+        };
+        // The exact bytes `write_json_atomic` writes, so that comparing them with the file on
+        // disk is exact (no float parsing).
+        let record_json =
+            serde_json::to_vec_pretty(&record).map_err(|e| PipelineError::Corrupt {
+                path: plan.run_dir(job.seed).join(RUN_FILE),
+                reason: e.to_string(),
+            })?;
+        Ok(Self {
+            record,
+            record_json,
+            env,
+            env_params,
+        })
+    }
+}
+
+/// `run.json`, `system_info.json` and the operative config of a run that starts training.
+pub(crate) fn write_run_files(
+    run: &RunDir,
+    record_json: &[u8],
+    plan: &ExperimentPlan,
+) -> Result<()> {
+    write_atomic(&run.file(RUN_FILE), record_json).map_err(io_err(&run.file(RUN_FILE)))?;
+    write_json_atomic(&run.file(SYSTEM_INFO_FILE), &SystemInfo::current())?;
+    if let Some(write) = &plan.operative {
+        write(run.path()).map_err(|reason| PipelineError::Corrupt {
+            path: run.file(OPERATIVE_FILE),
+            reason,
+        })?;
+    }
+    Ok(())
+}
+
+/// `curve.csv` and `curve.json`.
+pub(crate) fn write_curve(run: &RunDir, curve: &LearningCurve) -> Result<()> {
+    let mut csv = String::from("env_steps,mean_return,std_return,wall_seconds\n");
+    for p in &curve.points {
+        csv.push_str(&format!(
+            "{},{},{},{}\n",
+            p.env_steps, p.mean_return, p.std_return, p.wall_seconds
+        ));
+    }
+    write_atomic(&run.file(CURVE_CSV), csv.as_bytes()).map_err(io_err(&run.file(CURVE_CSV)))?;
+    write_json_atomic(&run.file(CURVE_JSON), curve)?;
+    Ok(())
+}
+
+/// `train_system.json`: the system figures of every segment that reported some, combined.
+pub(crate) fn write_train_system(run: &RunDir, segments: &TrainSegments) -> Result<()> {
+    let reported: Vec<PhaseSystem> = segments
+        .segments
+        .iter()
+        .filter_map(|s| s.system.clone())
+        .collect();
+    let killed = segments.segments.len() - reported.len();
+    write_json_atomic(
+        &run.file(TRAIN_SYSTEM_FILE),
+        &combine_segments(&reported, killed),
+    )?;
+    Ok(())
+}
+
 /// Trains one job (see [`train`]).
 pub fn train_one(registry: &Registry, job: &RunJob, opts: &TrainOptions) -> Result<RunOutcome> {
     Ok(train_run(registry, job, opts)?.outcome)
@@ -613,47 +767,23 @@ pub fn train_run(registry: &Registry, job: &RunJob, opts: &TrainOptions) -> Resu
     if dir.exists() && run.status()?.is_some_and(|s| s.state.is_complete()) {
         return Ok(skipped);
     }
-    let entry = registry.env(&plan.task.env_id)?.clone();
-    let env_params = registry.env_params(&plan.task.env_id, &plan.task.env_params)?;
     let algo_entry = registry.algorithm(&plan.algorithm.name)?;
     let algo_params = a2perf_core::Params::resolve(&algo_entry.params, &plan.algorithm.params)
         .map_err(|source| a2perf_core::RegistryError::Param {
             context: format!("algorithm {}", plan.algorithm.name),
             source,
         })?;
-    let probe = (entry.make)(&env_params).map_err(|source| a2perf_core::RegistryError::Env {
-        id: plan.task.env_id.clone(),
-        source,
-    })?;
-    let env_metadata = probe.spec().metadata.clone();
-    drop(probe);
-
-    let mut task = plan.task.clone();
-    task.env_params = env_params.values().clone();
-    let record = RunRecord {
-        format_version: RUN_FORMAT_VERSION,
-        experiment: plan.name.clone(),
-        task,
-        domain: entry.domain.clone(),
-        algorithm: super::AlgorithmSpec {
-            name: plan.algorithm.name.clone(),
-            params: algo_params.values().clone(),
-        },
-        seed: job.seed,
-        training: plan.training.clone(),
-        inference: plan.inference.clone(),
-        generalization: plan.generalization.clone(),
-        metrics: plan.metrics.clone(),
-        env_metadata,
-        dataset: plan.dataset.clone(),
+    let algorithm = super::AlgorithmSpec {
+        name: plan.algorithm.name.clone(),
+        params: algo_params.values().clone(),
     };
-    // The exact bytes `write_json_atomic` writes, so that comparing them with the file on disk
-    // is exact (no float parsing).
-    let record_json = serde_json::to_vec_pretty(&record).map_err(|e| PipelineError::Corrupt {
-        path: run.file(RUN_FILE),
-        reason: e.to_string(),
-    })?;
-    let factory = move |_i: usize| (entry.make)(&env_params);
+    let PlannedRun {
+        record_json,
+        env,
+        env_params,
+        ..
+    } = PlannedRun::new(registry, job, algorithm, None)?;
+    let factory = move |_i: usize| (env.make)(&env_params);
     let mut warnings = Vec::new();
     let mut retried = false;
     loop {
@@ -662,14 +792,7 @@ pub fn train_run(registry: &Registry, job: &RunJob, opts: &TrainOptions) -> Resu
             Start::Fresh => (None, TrainSegments::default()),
             Start::Resume(point, segments) => (Some(*point), segments),
         };
-        write_atomic(&run.file(RUN_FILE), &record_json).map_err(io_err(&run.file(RUN_FILE)))?;
-        write_json_atomic(&run.file(SYSTEM_INFO_FILE), &SystemInfo::current())?;
-        if let Some(write) = &plan.operative {
-            write(run.path()).map_err(|reason| PipelineError::Corrupt {
-                path: run.file(OPERATIVE_FILE),
-                reason,
-            })?;
-        }
+        write_run_files(&run, &record_json, plan)?;
         let point = match point {
             Some(mut p) => {
                 remove_checkpoints_after(&run, p.progress.env_steps)?;
@@ -785,25 +908,8 @@ pub fn train_run(registry: &Registry, job: &RunJob, opts: &TrainOptions) -> Resu
         })?;
         write_atomic(&run.file(POLICY_FILE), &ckpt.to_bytes())
             .map_err(io_err(&run.file(POLICY_FILE)))?;
-        let mut csv = String::from("env_steps,mean_return,std_return,wall_seconds\n");
-        for p in &curve.points {
-            csv.push_str(&format!(
-                "{},{},{},{}\n",
-                p.env_steps, p.mean_return, p.std_return, p.wall_seconds
-            ));
-        }
-        write_atomic(&run.file(CURVE_CSV), csv.as_bytes()).map_err(io_err(&run.file(CURVE_CSV)))?;
-        write_json_atomic(&run.file(CURVE_JSON), &curve)?;
-        let reported: Vec<PhaseSystem> = segments
-            .segments
-            .iter()
-            .filter_map(|s| s.system.clone())
-            .collect();
-        let killed = segments.segments.len() - reported.len();
-        write_json_atomic(
-            &run.file(TRAIN_SYSTEM_FILE),
-            &combine_segments(&reported, killed),
-        )?;
+        write_curve(&run, &curve)?;
+        write_train_system(&run, &segments)?;
         // Resume points are only good for an unfinished run, and off-policy ones hold the whole
         // replay buffer.
         ResumeDir::new(run.file(RESUME_DIR))

@@ -7,7 +7,10 @@
 - :mod:`a2perf_rs.metrics`: the seven reliability metrics (A2Perf's and the rl-reliability-metrics
   definitions), IQM with bootstrap intervals, probability of improvement, performance profiles;
 - :mod:`a2perf_rs.circuit`: ``PlacementCost``, the exact circuit placement cost with the method
-  names of circuit_training's ``plc_client``.
+  names of circuit_training's ``plc_client``;
+- :mod:`a2perf_rs.harness`: your own agent benchmarked like the built-in ones —
+  :class:`TrainingRun` (run directory, system meters, seeded environments, curve, checkpoints),
+  :func:`infer`, :func:`generalize`, :func:`collect` with Python policies, and :func:`report`.
 
 The import name is ``a2perf_rs`` so that the original ``a2perf`` package can be installed beside it.
 """
@@ -15,6 +18,7 @@ The import name is ``a2perf_rs`` so that the original ``a2perf`` package can be 
 from . import _native, circuit, metrics
 from ._native import BackendError
 from .envs import A2PerfEnv, env_ids, env_params, register_all
+from .harness import TrainingRun, collect, generalize, infer, report
 from .vector import A2PerfVectorEnv
 
 __version__: str = _native.__version__
@@ -23,7 +27,12 @@ __all__ = [
     "A2PerfEnv",
     "A2PerfVectorEnv",
     "BackendError",
+    "TrainingRun",
     "circuit",
+    "collect",
+    "generalize",
+    "infer",
+    "report",
     "metrics",
     "chromium_unavailable_reason",
     "env_ids",

@@ -51,6 +51,10 @@ class A2PerfEnv(gym.Env[Any, Any]):
             (``a2perf circuit render``, ``a2perf locomotion render``), not frames.
         illegal_action: ``"terminate"`` (default) or ``"raise"``, see the module documentation.
         illegal_action_reward: Reward of an illegal action under ``"terminate"``.
+        episode_seeds: ``(run_seed, index)``: every ``reset()`` without a seed takes the next
+            seed of environment ``index``'s stream in a run with ``run_seed``, as the built-in
+            algorithms' training environments do (what :meth:`a2perf_rs.TrainingRun.make_env`
+            gives). ``None`` (default): the environment continues its own random stream.
         **params: The environment's parameters.
     """
 
@@ -62,6 +66,7 @@ class A2PerfEnv(gym.Env[Any, Any]):
         render_mode: str | None = None,
         illegal_action: str = "terminate",
         illegal_action_reward: float | None = None,
+        episode_seeds: tuple[int, int] | None = None,
         **params: Any,
     ) -> None:
         if render_mode is not None:
@@ -74,6 +79,7 @@ class A2PerfEnv(gym.Env[Any, Any]):
             params,
             illegal_action=illegal_action,
             illegal_action_reward=illegal_action_reward,
+            episode_seeds=episode_seeds,
         )
         spec = self._native.spec()
         self.env_id = env_id

@@ -39,6 +39,11 @@ class A2PerfVectorEnv(VectorEnv):
         illegal_action, illegal_action_reward: As for :class:`a2perf_rs.envs.A2PerfEnv`.
         max_episode_steps: Ignored unless it equals the environment's own limit (Gymnasium passes
             the registered value, which is ``None`` here); the environments truncate themselves.
+        episode_seeds: A training run's seed: every reset without a seed of environment ``i``
+            (autoresets included) takes the next seed of stream ``i`` of that run, as the
+            built-in algorithms' training environments do (what
+            :meth:`a2perf_rs.TrainingRun.make_vec` gives). ``None`` (default): Gymnasium's
+            semantics above.
         **params: The environment's parameters (the same for every copy).
     """
 
@@ -52,6 +57,7 @@ class A2PerfVectorEnv(VectorEnv):
         illegal_action_reward: float | None = None,
         max_episode_steps: int | None = None,
         render_mode: str | None = None,
+        episode_seeds: int | None = None,
         **params: Any,
     ) -> None:
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool):
@@ -73,6 +79,7 @@ class A2PerfVectorEnv(VectorEnv):
             copy=copy,
             illegal_action=illegal_action,
             illegal_action_reward=illegal_action_reward,
+            episode_seeds=episode_seeds,
         )
         spec = self._native.spec()
         if max_episode_steps is not None and max_episode_steps != spec["max_episode_steps"]:

@@ -236,6 +236,31 @@ pub struct EpisodeCore {
     pub illegal: bool,
     /// Illegal-action policy.
     pub policy: IllegalAction,
+    /// Where resets without a seed take theirs from (`None`: the environment's own stream).
+    pub episode_seeds: Option<EpisodeSeeds>,
+}
+
+/// The reset seeds of a training run's environment (`a2perf_rs.TrainingRun.make_env` /
+/// `make_vec`): episode `k` of environment `index` gets
+/// [`a2perf_pipeline::external::episode_seed`]`(run_seed, index, k)`, as the built-in algorithms'
+/// environments do.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EpisodeSeeds {
+    /// The run's seed.
+    pub run_seed: u64,
+    /// The environment's index.
+    pub index: usize,
+    /// Episodes started so far from this stream.
+    pub episode: u64,
+}
+
+impl EpisodeSeeds {
+    /// The seed of the next episode.
+    fn next_seed(&mut self) -> u64 {
+        let s = a2perf_pipeline::external::episode_seed(self.run_seed, self.index, self.episode);
+        self.episode += 1;
+        s
+    }
 }
 
 impl EpisodeCore {
@@ -250,11 +275,25 @@ impl EpisodeCore {
             needs_reset: true,
             illegal: false,
             policy,
+            episode_seeds: None,
         }
     }
 
-    /// Starts an episode (`None`: the environment continues its own random stream).
+    /// Resets without a seed draw theirs from environment `index`'s stream of the run with
+    /// `run_seed` (see [`EpisodeSeeds`]).
+    pub fn with_episode_seeds(mut self, run_seed: u64, index: usize) -> Self {
+        self.episode_seeds = Some(EpisodeSeeds {
+            run_seed,
+            index,
+            episode: 0,
+        });
+        self
+    }
+
+    /// Starts an episode (`None`: the next seed of the episode-seed stream when there is one,
+    /// else the environment continues its own random stream).
     pub fn reset(&mut self, seed: Option<u64>) -> PyResult<()> {
+        let seed = seed.or_else(|| self.episode_seeds.as_mut().map(EpisodeSeeds::next_seed));
         self.needs_reset = true;
         self.illegal = false;
         self.step.reward = 0.0;
@@ -398,22 +437,29 @@ fn closed() -> PyErr {
 #[pymethods]
 impl PyEnv {
     /// Builds `env_id` with `params` (the registry's typed parameters).
+    /// `episode_seeds=(run_seed, index)` seeds every reset without a seed from a training run's
+    /// stream (see [`EpisodeSeeds`]).
     #[new]
-    #[pyo3(signature = (env_id, params=None, illegal_action="terminate", illegal_action_reward=None))]
+    #[pyo3(signature = (env_id, params=None, illegal_action="terminate", illegal_action_reward=None, episode_seeds=None))]
     fn new(
         py: Python<'_>,
         env_id: &str,
         params: Option<&Bound<'_, PyDict>>,
         illegal_action: &str,
         illegal_action_reward: Option<f64>,
+        episode_seeds: Option<(u64, usize)>,
     ) -> PyResult<Self> {
         let (env, resolved) = make_env(env_id, params)?;
         let policy = IllegalAction::parse(illegal_action, illegal_action_reward, &resolved)?;
         let spec = env.spec().clone();
+        let mut core = EpisodeCore::new(env, policy);
+        if let Some((run_seed, index)) = episode_seeds {
+            core = core.with_episode_seeds(run_seed, index);
+        }
         Ok(Self {
             layout: ObsLayout::of(py, &spec.observation_space)?,
             action: ActionSpec::of(&spec.action_space)?,
-            core: Mutex::new(Some(EpisodeCore::new(env, policy))),
+            core: Mutex::new(Some(core)),
             spec,
             params: resolved,
         })

@@ -6,11 +6,14 @@
 //! (`python/a2perf_rs/`) turns these into Gymnasium environments and numpy/pandas functions.
 //!
 //! One module per area: [`env`] (one environment), [`vec_env`] (N environments stepped in Rust
-//! threads with the GIL released), [`metrics`], [`circuit`]; [`convert`] and [`errors`] hold the
-//! conversions and the exception mapping they share.
+//! threads with the GIL released), [`metrics`], [`circuit`], [`harness`] (Python agents
+//! benchmarked by the pipelines: `TrainingRun`, `infer`, `generalize`, `collect`, `report`) with
+//! [`policy`] (Python callables as policies); [`convert`] and [`errors`] hold the conversions and
+//! the exception mapping they share.
 //!
 //! It deliberately holds no benchmark logic of its own: environments come from
-//! `a2perf_pipeline::registry`, metrics from `a2perf-metrics`, costs from `a2perf-circuit`.
+//! `a2perf_pipeline::registry`, metrics from `a2perf-metrics`, costs from `a2perf-circuit`, the
+//! harness from `a2perf_pipeline::external` and the pipelines.
 
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PyTuple};
@@ -19,7 +22,9 @@ pub mod circuit;
 pub mod convert;
 pub mod env;
 pub mod errors;
+pub mod harness;
 pub mod metrics;
+pub mod policy;
 pub mod vec_env;
 
 /// Every registered environment as `(id, domain, summary, [(name, kind, choices, default,
@@ -63,5 +68,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<vec_env::PyVecEnv>()?;
     metrics::register(m)?;
     circuit::register(m)?;
+    harness::register(m)?;
     Ok(())
 }

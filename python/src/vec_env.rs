@@ -386,9 +386,11 @@ impl PyVecEnv {
 
 #[pymethods]
 impl PyVecEnv {
-    /// `num_envs` environments `env_id` with `params`.
+    /// `num_envs` environments `env_id` with `params`. `episode_seeds=run_seed` seeds every
+    /// reset without a seed (autoresets included) of environment `i` from stream `i` of a
+    /// training run (see [`crate::env::EpisodeSeeds`]).
     #[new]
-    #[pyo3(signature = (env_id, num_envs, params=None, autoreset_mode="next_step", copy=true, illegal_action="terminate", illegal_action_reward=None))]
+    #[pyo3(signature = (env_id, num_envs, params=None, autoreset_mode="next_step", copy=true, illegal_action="terminate", illegal_action_reward=None, episode_seeds=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -399,6 +401,7 @@ impl PyVecEnv {
         copy: bool,
         illegal_action: &str,
         illegal_action_reward: Option<f64>,
+        episode_seeds: Option<u64>,
     ) -> PyResult<Self> {
         if num_envs == 0 {
             return Err(PyValueError::new_err("num_envs must be at least 1"));
@@ -414,14 +417,18 @@ impl PyVecEnv {
         };
         let mut slots = Vec::with_capacity(num_envs);
         let mut first = None;
-        for _ in 0..num_envs {
+        for i in 0..num_envs {
             let (env, resolved) = make_env(env_id, params)?;
             let policy = IllegalAction::parse(illegal_action, illegal_action_reward, &resolved)?;
             if first.is_none() {
                 first = Some((env.spec().clone(), resolved));
             }
+            let mut core = EpisodeCore::new(env, policy);
+            if let Some(run_seed) = episode_seeds {
+                core = core.with_episode_seeds(run_seed, i);
+            }
             slots.push(Slot {
-                core: EpisodeCore::new(env, policy),
+                core,
                 pending_reset: false,
                 ended: false,
                 final_obs: Observation::default(),

@@ -402,9 +402,9 @@ pub fn load_groups(dirs: &[PathBuf]) -> Result<(Vec<Group>, Vec<SkippedRun>)> {
             if !seen.insert(canon) {
                 continue;
             }
-            let run = LoadedRun::open(&dir)?;
-            if !run.is_complete()? {
-                skipped.push((dir.display().to_string(), "training incomplete".into()));
+            LoadedRun::open(&dir)?;
+            if let Some(why) = incomplete_reason(&dir)? {
+                skipped.push((dir.display().to_string(), why));
                 continue;
             }
             let data = RunData::load(&dir)?;
@@ -461,6 +461,34 @@ pub fn load_groups(dirs: &[PathBuf]) -> Result<(Vec<Group>, Vec<SkippedRun>)> {
         )));
     }
     Ok((out, skipped))
+}
+
+/// Why the run in `dir` cannot be reported (`None`: its training completed): failed and
+/// interrupted runs say so, with their status note.
+fn incomplete_reason(dir: &Path) -> Result<Option<String>> {
+    use a2perf_core::RunState;
+    let status = a2perf_core::RunDir::new(dir).status()?;
+    Ok(match status {
+        Some(s) if s.state.is_complete() => None,
+        Some(s) => {
+            let note = s.note.trim();
+            let note = note
+                .strip_prefix("failed: ")
+                .or_else(|| note.strip_prefix("interrupted: "))
+                .unwrap_or(note);
+            let state = match s.state {
+                RunState::Failed => "training failed",
+                RunState::Interrupted => "training interrupted",
+                _ => "training incomplete (running, or killed while running)",
+            };
+            Some(if note.is_empty() {
+                state.to_string()
+            } else {
+                format!("{state}: {note}")
+            })
+        }
+        None => Some("training never started (no status.json)".into()),
+    })
 }
 
 /// A run directory left out of a report, and why.
