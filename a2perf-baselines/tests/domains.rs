@@ -8,39 +8,13 @@ mod common;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use a2perf_baselines::Bc;
 use a2perf_baselines::dataset::{Dataset, Sample};
-use a2perf_baselines::{Bc, register};
 use a2perf_core::{
     ActMode, Action, Algorithm, CancelToken, DiscardCheckpoints, Env, EnvError, Params, Policy,
     RandomPolicy, Registry, Step, TrainingContext, TrainingSettings, Value,
 };
-use common::ints;
-
-fn skip_in_debug(name: &str) -> bool {
-    if cfg!(debug_assertions) {
-        println!(
-            "skipping {name}: domain learning tests run only in release builds (cargo test --release)"
-        );
-        return true;
-    }
-    false
-}
-
-fn registry() -> Registry {
-    let mut reg = Registry::new();
-    register(&mut reg);
-    a2perf_web::register(&mut reg);
-    a2perf_circuit::register(&mut reg);
-    a2perf_locomotion::register(&mut reg);
-    reg
-}
-
-fn env_params(pairs: &[(&str, Value)]) -> BTreeMap<String, Value> {
-    pairs
-        .iter()
-        .map(|(k, v)| (k.to_string(), v.clone()))
-        .collect()
-}
+use common::{domains_registry, env_params, ints, skip_in_debug};
 
 fn train_on(
     reg: &Registry,
@@ -122,7 +96,7 @@ fn web_net() -> Vec<(&'static str, Value)> {
 /// Trains `algo` (the web network plus `hp`) on one level-1 website and asserts ≥ 90% greedy
 /// success over 50 episodes.
 fn assert_learns_web(algo: &str, hp: &[(&'static str, Value)]) {
-    let reg = registry();
+    let reg = domains_registry();
     let mut all = web_net();
     all.extend_from_slice(hp);
     let mut alg = make(&reg, algo, &all);
@@ -146,7 +120,7 @@ fn assert_learns_web(algo: &str, hp: &[(&'static str, Value)]) {
 
 #[test]
 fn ppo_learns_web_navigation_level_1() {
-    if skip_in_debug("ppo_learns_web_navigation_level_1") {
+    if skip_in_debug("ppo_learns_web_navigation_level_1", "domain learning tests") {
         return;
     }
     assert_learns_web(
@@ -162,7 +136,10 @@ fn ppo_learns_web_navigation_level_1() {
 
 #[test]
 fn ddqn_learns_web_navigation_level_1() {
-    if skip_in_debug("ddqn_learns_web_navigation_level_1") {
+    if skip_in_debug(
+        "ddqn_learns_web_navigation_level_1",
+        "domain learning tests",
+    ) {
         return;
     }
     assert_learns_web(
@@ -183,10 +160,10 @@ fn ddqn_learns_web_navigation_level_1() {
 
 #[test]
 fn bc_clones_the_web_oracle() {
-    if skip_in_debug("bc_clones_the_web_oracle") {
+    if skip_in_debug("bc_clones_the_web_oracle", "domain learning tests") {
         return;
     }
-    let reg = registry();
+    let reg = domains_registry();
     let mut cfg = a2perf_web::WebNavConfig::new(1);
     cfg.num_websites = 1;
     let mut env = a2perf_web::WebNavEnv::new(cfg).expect("web env");
@@ -271,7 +248,7 @@ fn greedy_cost(reg: &Registry, policy: &mut dyn Policy) -> f64 {
 // random placements ~12% below it and a 1,500-step hill climb ~23% below (see
 // `circuit_cost_landscape`).
 fn assert_beats_random_placement(algo: &str, hp: &[(&str, Value)], total_env_steps: u64) {
-    let reg = registry();
+    let reg = domains_registry();
     let random = random_mean_cost(&reg);
     let mut alg = make(&reg, algo, hp);
     let settings = TrainingSettings {
@@ -296,7 +273,10 @@ fn assert_beats_random_placement(algo: &str, hp: &[(&str, Value)], total_env_ste
 
 #[test]
 fn circuit_ppo_beats_random_placement() {
-    if skip_in_debug("circuit_ppo_beats_random_placement") {
+    if skip_in_debug(
+        "circuit_ppo_beats_random_placement",
+        "domain learning tests",
+    ) {
         return;
     }
     // Today 18.0% below.
@@ -318,7 +298,10 @@ fn circuit_ppo_beats_random_placement() {
 
 #[test]
 fn circuit_ddqn_beats_random_placement() {
-    if skip_in_debug("circuit_ddqn_beats_random_placement") {
+    if skip_in_debug(
+        "circuit_ddqn_beats_random_placement",
+        "domain learning tests",
+    ) {
         return;
     }
     // Today 14.7% below.
@@ -370,10 +353,10 @@ fn pace_return(reg: &Registry, policy: &mut dyn Policy) -> f64 {
 
 #[test]
 fn ppo_improves_the_pace_task() {
-    if skip_in_debug("ppo_improves_the_pace_task") {
+    if skip_in_debug("ppo_improves_the_pace_task", "domain learning tests") {
         return;
     }
-    let reg = registry();
+    let reg = domains_registry();
     let base = pace_return(&reg, &mut Zero(12));
     let mut ppo = make(
         &reg,
@@ -410,10 +393,10 @@ fn ppo_improves_the_pace_task() {
 
 #[test]
 fn sac_improves_the_pace_task() {
-    if skip_in_debug("sac_improves_the_pace_task") {
+    if skip_in_debug("sac_improves_the_pace_task", "domain learning tests") {
         return;
     }
-    let reg = registry();
+    let reg = domains_registry();
     let base = pace_return(&reg, &mut Zero(12));
     let mut sac = make(
         &reg,
@@ -458,7 +441,7 @@ fn sac_improves_the_pace_task() {
 #[test]
 #[ignore]
 fn circuit_cost_landscape() {
-    let reg = registry();
+    let reg = domains_registry();
     let costs = random_costs(&reg);
     let mut env = reg.make_env(CIRCUIT, &BTreeMap::new()).unwrap();
     let min = costs.iter().cloned().fold(f64::INFINITY, f64::min);

@@ -8,40 +8,18 @@
 //! that the final policy's checkpoint bytes, the curve (steps and the bits of every return) and
 //! the later interval checkpoints are the same, as is the return of the final policy.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use a2perf_baselines::{Bc, Dataset, register};
+use a2perf_baselines::{Bc, Dataset};
+use common::{domains_registry, env_params, ints, skip_in_debug};
+
 use a2perf_core::{
     ActMode, CancelToken, Checkpoint, CheckpointSink, Env, EnvError, Params, Policy, RandomPolicy,
     Registry, ResumePoint, RunError, TrainingContext, TrainingSettings, Value, rollout,
 };
-
-fn skip_in_debug(name: &str) -> bool {
-    if cfg!(debug_assertions) {
-        println!(
-            "skipping {name}: resume tests on the domains run only in release builds (cargo test --release)"
-        );
-        return true;
-    }
-    false
-}
-
-fn registry() -> Registry {
-    let mut reg = Registry::new();
-    register(&mut reg);
-    a2perf_web::register(&mut reg);
-    a2perf_circuit::register(&mut reg);
-    a2perf_locomotion::register(&mut reg);
-    reg
-}
-
-fn params(pairs: &[(&str, Value)]) -> BTreeMap<String, Value> {
-    pairs
-        .iter()
-        .map(|(k, v)| (k.to_string(), v.clone()))
-        .collect()
-}
 
 /// Keeps checkpoints and resume points in memory; cancels `cancel` when the policy checkpoint
 /// at `cancel_at` is written, so that the next progress call is interrupted mid-interval.
@@ -163,7 +141,7 @@ impl Case {
     /// The uninterrupted run, then resumptions at the second interval boundary and at a point
     /// taken mid-interval by a cancellation just after the first boundary.
     fn check(&self) {
-        let reg = registry();
+        let reg = domains_registry();
         let mut clean_sink = Memory::default();
         let clean = self
             .train(&reg, None, &mut clean_sink)
@@ -265,10 +243,6 @@ const CIRCUIT: &str = "CircuitTraining-Synthetic-Small-v0";
 const WEB: &str = "WebNavigation-Difficulty-01-v0";
 const PACE: &str = "QuadrupedLocomotion-DogPace-v0";
 
-fn ints(v: &[i64]) -> Value {
-    Value::List(v.iter().map(|i| Value::Int(*i)).collect())
-}
-
 fn settings(total: u64, eval: u64, checkpoint: u64, num_envs: usize) -> TrainingSettings {
     TrainingSettings {
         total_env_steps: total,
@@ -280,7 +254,7 @@ fn settings(total: u64, eval: u64, checkpoint: u64, num_envs: usize) -> Training
 }
 
 fn web_params() -> BTreeMap<String, Value> {
-    params(&[("num_websites", Value::Int(1))])
+    env_params(&[("num_websites", Value::Int(1))])
 }
 
 /// Random-policy demonstrations on `env_id`, for BC.
@@ -294,12 +268,15 @@ fn random_dataset(reg: &Registry, env_id: &str, episodes: usize) -> Arc<Dataset>
 
 #[test]
 fn ppo_resumes_exactly_on_circuit() {
-    if skip_in_debug("ppo_resumes_exactly_on_circuit") {
+    if skip_in_debug(
+        "ppo_resumes_exactly_on_circuit",
+        "resume tests on the domains",
+    ) {
         return;
     }
     Case {
         algorithm: "ppo",
-        hp: params(&[
+        hp: env_params(&[
             ("num_steps", Value::Int(24)),
             ("minibatch_size", Value::Int(32)),
             ("latent_dim", Value::Int(16)),
@@ -316,12 +293,15 @@ fn ppo_resumes_exactly_on_circuit() {
 
 #[test]
 fn ppo_resumes_exactly_on_locomotion() {
-    if skip_in_debug("ppo_resumes_exactly_on_locomotion") {
+    if skip_in_debug(
+        "ppo_resumes_exactly_on_locomotion",
+        "resume tests on the domains",
+    ) {
         return;
     }
     Case {
         algorithm: "ppo",
-        hp: params(&[
+        hp: env_params(&[
             ("num_steps", Value::Int(64)),
             ("minibatch_size", Value::Int(64)),
             ("hidden_sizes", ints(&[32, 32])),
@@ -336,12 +316,12 @@ fn ppo_resumes_exactly_on_locomotion() {
 
 #[test]
 fn ppo_resumes_exactly_on_web() {
-    if skip_in_debug("ppo_resumes_exactly_on_web") {
+    if skip_in_debug("ppo_resumes_exactly_on_web", "resume tests on the domains") {
         return;
     }
     Case {
         algorithm: "ppo",
-        hp: params(&[
+        hp: env_params(&[
             ("num_steps", Value::Int(32)),
             ("minibatch_size", Value::Int(32)),
             ("embedding_dim", Value::Int(16)),
@@ -357,12 +337,12 @@ fn ppo_resumes_exactly_on_web() {
 
 #[test]
 fn ddqn_resumes_exactly_on_web() {
-    if skip_in_debug("ddqn_resumes_exactly_on_web") {
+    if skip_in_debug("ddqn_resumes_exactly_on_web", "resume tests on the domains") {
         return;
     }
     Case {
         algorithm: "ddqn",
-        hp: params(&[
+        hp: env_params(&[
             ("batch_size", Value::Int(16)),
             ("replay_capacity", Value::Int(150)),
             ("learning_starts", Value::Int(32)),
@@ -381,12 +361,15 @@ fn ddqn_resumes_exactly_on_web() {
 
 #[test]
 fn ddqn_resumes_exactly_on_circuit() {
-    if skip_in_debug("ddqn_resumes_exactly_on_circuit") {
+    if skip_in_debug(
+        "ddqn_resumes_exactly_on_circuit",
+        "resume tests on the domains",
+    ) {
         return;
     }
     Case {
         algorithm: "ddqn",
-        hp: params(&[
+        hp: env_params(&[
             ("batch_size", Value::Int(16)),
             ("replay_capacity", Value::Int(200)),
             ("learning_starts", Value::Int(30)),
@@ -405,12 +388,15 @@ fn ddqn_resumes_exactly_on_circuit() {
 
 #[test]
 fn sac_resumes_exactly_on_locomotion() {
-    if skip_in_debug("sac_resumes_exactly_on_locomotion") {
+    if skip_in_debug(
+        "sac_resumes_exactly_on_locomotion",
+        "resume tests on the domains",
+    ) {
         return;
     }
     Case {
         algorithm: "sac",
-        hp: params(&[
+        hp: env_params(&[
             ("batch_size", Value::Int(32)),
             ("replay_capacity", Value::Int(300)),
             ("learning_starts", Value::Int(64)),
@@ -429,14 +415,17 @@ fn sac_resumes_exactly_on_locomotion() {
 
 #[test]
 fn bc_resumes_exactly_on_circuit_and_locomotion() {
-    if skip_in_debug("bc_resumes_exactly_on_circuit_and_locomotion") {
+    if skip_in_debug(
+        "bc_resumes_exactly_on_circuit_and_locomotion",
+        "resume tests on the domains",
+    ) {
         return;
     }
-    let reg = registry();
+    let reg = domains_registry();
     for (env_id, episodes) in [(CIRCUIT, 10), (PACE, 3)] {
         Case {
             algorithm: "bc",
-            hp: params(&[
+            hp: env_params(&[
                 ("batch_size", Value::Int(32)),
                 ("learning_rate", Value::Float(1e-3)),
                 ("latent_dim", Value::Int(16)),
@@ -454,13 +443,16 @@ fn bc_resumes_exactly_on_circuit_and_locomotion() {
 /// A resume state from another configuration is refused with a clear error, not misread.
 #[test]
 fn a_state_from_another_configuration_is_refused() {
-    if skip_in_debug("a_state_from_another_configuration_is_refused") {
+    if skip_in_debug(
+        "a_state_from_another_configuration_is_refused",
+        "resume tests on the domains",
+    ) {
         return;
     }
-    let reg = registry();
+    let reg = domains_registry();
     let case = |hidden: i64| Case {
         algorithm: "ppo",
-        hp: params(&[
+        hp: env_params(&[
             ("num_steps", Value::Int(24)),
             ("latent_dim", Value::Int(16)),
             ("hidden_sizes", ints(&[hidden, hidden])),

@@ -371,3 +371,30 @@ pub fn mean_return(env: &mut dyn Env, policy: &mut dyn Policy, episodes: usize) 
 pub fn ints(v: &[i64]) -> Value {
     Value::List(v.iter().map(|i| Value::Int(*i)).collect())
 }
+
+/// Whether to skip a test on the real domains: they run only in release builds (prints why).
+pub fn skip_in_debug(name: &str, what: &str) -> bool {
+    if cfg!(debug_assertions) {
+        println!("skipping {name}: {what} run only in release builds (cargo test --release)");
+        return true;
+    }
+    false
+}
+
+/// The baselines and the three domains.
+pub fn domains_registry() -> a2perf_core::Registry {
+    let mut reg = a2perf_core::Registry::new();
+    a2perf_baselines::register(&mut reg);
+    a2perf_web::register(&mut reg);
+    a2perf_circuit::register(&mut reg);
+    a2perf_locomotion::register(&mut reg);
+    reg
+}
+
+/// Environment parameters from `(name, value)` pairs.
+pub fn env_params(pairs: &[(&str, Value)]) -> BTreeMap<String, Value> {
+    pairs
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect()
+}
