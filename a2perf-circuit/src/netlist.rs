@@ -51,6 +51,24 @@ pub enum NodeKind {
 }
 
 impl NodeKind {
+    /// The netlist's `type` attribute for this kind (`MACRO`, `macro`, `MACRO_PIN`,
+    /// `macro_pin`, `PORT`, `STDCELL`), the names `plc_client`'s `get_node_type` returns.
+    ///
+    /// ```
+    /// use a2perf_circuit::netlist::NodeKind;
+    /// assert_eq!(NodeKind::SoftMacroPin.type_name(), "macro_pin");
+    /// ```
+    pub fn type_name(self) -> &'static str {
+        match self {
+            NodeKind::HardMacro => "MACRO",
+            NodeKind::SoftMacro => "macro",
+            NodeKind::HardMacroPin => "MACRO_PIN",
+            NodeKind::SoftMacroPin => "macro_pin",
+            NodeKind::Port => "PORT",
+            NodeKind::StdCell => "STDCELL",
+        }
+    }
+
     /// Whether the node has an area (macros and standard cells).
     pub fn has_area(self) -> bool {
         matches!(
@@ -208,18 +226,10 @@ pub struct Node {
 impl Node {
     /// A node of `kind` with everything else empty.
     pub fn new(name: &str, kind: NodeKind) -> Self {
-        let type_name = match kind {
-            NodeKind::HardMacro => "MACRO",
-            NodeKind::SoftMacro => "macro",
-            NodeKind::HardMacroPin => "MACRO_PIN",
-            NodeKind::SoftMacroPin => "macro_pin",
-            NodeKind::Port => "PORT",
-            NodeKind::StdCell => "STDCELL",
-        };
         Self {
             name: name.to_string(),
             kind,
-            type_name: type_name.to_string(),
+            type_name: kind.type_name().to_string(),
             width: 0.0,
             height: 0.0,
             x: 0.0,

@@ -536,14 +536,7 @@ impl PyPlacementCost {
     fn get_node_type(&self, node_index: i64) -> PyResult<&'static str> {
         self.with("get_node_type", |s| {
             let i = s.node(node_index)?;
-            Ok(match s.netlist.nodes[i].kind {
-                NodeKind::HardMacro => "MACRO",
-                NodeKind::SoftMacro => "macro",
-                NodeKind::HardMacroPin => "MACRO_PIN",
-                NodeKind::SoftMacroPin => "macro_pin",
-                NodeKind::Port => "PORT",
-                NodeKind::StdCell => "STDCELL",
-            })
+            Ok(s.netlist.nodes[i].kind.type_name())
         })
     }
 

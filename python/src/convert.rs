@@ -75,6 +75,14 @@ pub fn to_value(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<Value> {
     )))
 }
 
+/// The Python type name of `obj`, for error messages (empty if it has none).
+pub fn type_name_of(obj: &Bound<'_, PyAny>) -> String {
+    obj.get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_default()
+}
+
 /// A configuration value as a Python object.
 pub fn from_value<'py>(py: Python<'py>, v: &Value) -> PyResult<Bound<'py, PyAny>> {
     Ok(match v {
@@ -257,11 +265,7 @@ impl ActionSpec {
                     )));
                 }
                 let a: i64 = obj.extract().map_err(|_| {
-                    let ty = obj
-                        .get_type()
-                        .name()
-                        .map(|n| n.to_string())
-                        .unwrap_or_default();
+                    let ty = type_name_of(obj);
                     let shape = obj
                         .getattr("shape")
                         .map(|s| format!(" of shape {s}"))

@@ -20,7 +20,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use rayon::prelude::*;
 
-use crate::convert::ActionSpec;
+use crate::convert::{ActionSpec, type_name_of};
 use crate::env::{EpisodeCore, IllegalAction, ObsLayout, guard_close, make_env, spec_to_py};
 
 /// Gymnasium's autoreset modes that are supported.
@@ -323,11 +323,7 @@ impl PyVecEnv {
                     PyTypeError::new_err(format!(
                         "actions must be an int64 array of shape ({n},) (a2perf_rs converts \
                          integer arrays); got {}",
-                        actions
-                            .get_type()
-                            .name()
-                            .map(|s| s.to_string())
-                            .unwrap_or_default()
+                        type_name_of(actions)
                     ))
                 })?;
                 if arr.len() != n {
@@ -353,11 +349,7 @@ impl PyVecEnv {
                             .map(|d| d.to_string())
                             .collect::<Vec<_>>()
                             .join(", "),
-                        actions
-                            .get_type()
-                            .name()
-                            .map(|s| s.to_string())
-                            .unwrap_or_default()
+                        type_name_of(actions)
                     ))
                 })?;
                 let view = arr.as_array();
