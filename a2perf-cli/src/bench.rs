@@ -1,12 +1,11 @@
 //! `a2perf bench`: steps any registered environment with uniformly random legal actions.
 
 use std::collections::BTreeMap;
-use std::time::Instant;
 
-use a2perf_core::{Env, Registry, RngStream, Step, Value};
+use a2perf_core::{Registry, Value};
+use a2perf_pipeline::bench::bench_env;
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use serde::Serialize;
 
 /// Arguments of `a2perf bench`.
 #[derive(Args, Debug)]
@@ -27,25 +26,6 @@ pub struct BenchArgs {
     pub json: bool,
 }
 
-#[derive(Serialize, Debug)]
-struct Percentiles {
-    p50: f64,
-    p90: f64,
-    p99: f64,
-}
-
-#[derive(Serialize, Debug)]
-struct BenchReport {
-    env_id: String,
-    steps: u64,
-    episodes: u64,
-    steps_per_second: f64,
-    reset_time_us: Percentiles,
-    step_latency_us: Percentiles,
-    mean_step_us: f64,
-    params: BTreeMap<String, Value>,
-}
-
 /// Parses `key=value` pairs into environment parameters.
 pub fn parse_sets(sets: &[String]) -> Result<BTreeMap<String, Value>> {
     let mut out = BTreeMap::new();
@@ -62,93 +42,14 @@ pub fn parse_sets(sets: &[String]) -> Result<BTreeMap<String, Value>> {
     Ok(out)
 }
 
-fn percentiles(samples: &mut [f64]) -> Percentiles {
-    samples.sort_by(f64::total_cmp);
-    let at = |q: f64| -> f64 {
-        if samples.is_empty() {
-            return f64::NAN;
-        }
-        let i = ((samples.len() - 1) as f64 * q).round() as usize;
-        samples[i]
-    };
-    Percentiles {
-        p50: at(0.5),
-        p90: at(0.9),
-        p99: at(0.99),
-    }
-}
-
 /// Runs the benchmark and prints the report.
 pub fn run(registry: &Registry, args: &BenchArgs) -> Result<()> {
     if args.steps == 0 {
         bail!("--steps must be at least 1");
     }
     let params = parse_sets(&args.set)?;
-    let mut env = registry
-        .make_env(&args.env_id, &params)
-        .with_context(|| format!("cannot build environment `{}`", args.env_id))?;
-    let resolved = registry.env_params(&args.env_id, &params)?;
-    let spec = env.spec().clone();
-    let mut rng = RngStream::new(args.seed, "bench/actions");
-    let seeds = RngStream::new(args.seed, "bench/episodes");
-    let mut step = Step::default();
-    let mut reset_us = Vec::new();
-    let mut step_us = Vec::with_capacity(args.steps as usize);
-    let mut episodes = 0u64;
-    let mut episode_len = 0usize;
-    let limit = spec.max_episode_steps.unwrap_or(usize::MAX);
-
-    let mut reset = |env: &mut Box<dyn Env>, step: &mut Step, episodes: &mut u64| -> Result<()> {
-        let t = Instant::now();
-        env.reset_into(
-            Some(seeds.derive_index(*episodes).next_u64()),
-            &mut step.observation,
-        )?;
-        reset_us.push(t.elapsed().as_secs_f64() * 1e6);
-        *episodes += 1;
-        Ok(())
-    };
-    reset(&mut env, &mut step, &mut episodes)?;
-    let total = Instant::now();
-    let mut stepping = 0.0;
-    for _ in 0..args.steps {
-        let action = match spec
-            .action_space
-            .sample(&mut rng, step.observation.action_mask.as_deref())
-        {
-            Some(a) => a,
-            None => {
-                // No legal action left: the episode cannot continue.
-                reset(&mut env, &mut step, &mut episodes)?;
-                episode_len = 0;
-                continue;
-            }
-        };
-        let t = Instant::now();
-        env.step_into(&action, &mut step)?;
-        let dt = t.elapsed().as_secs_f64();
-        stepping += dt;
-        step_us.push(dt * 1e6);
-        episode_len += 1;
-        if step.done() || episode_len >= limit {
-            reset(&mut env, &mut step, &mut episodes)?;
-            episode_len = 0;
-        }
-    }
-    let wall = total.elapsed().as_secs_f64();
-    env.close()?;
-    let n = step_us.len() as u64;
-    let report = BenchReport {
-        env_id: spec.id.clone(),
-        steps: n,
-        episodes,
-        // Wall-clock rate, including resets and action sampling: what a training loop sees.
-        steps_per_second: n as f64 / wall.max(1e-12),
-        mean_step_us: stepping * 1e6 / n.max(1) as f64,
-        reset_time_us: percentiles(&mut reset_us),
-        step_latency_us: percentiles(&mut step_us),
-        params: resolved.values().clone(),
-    };
+    let report = bench_env(registry, &args.env_id, &params, args.steps, args.seed)
+        .with_context(|| format!("cannot benchmark environment `{}`", args.env_id))?;
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {

@@ -157,10 +157,17 @@ pub trait Env: Send {
     /// Starts a new episode. With `Some(seed)` the episode's randomness is re-seeded from it;
     /// with `None` the environment continues its own stream. Writes the first observation into
     /// `obs`, reusing its buffers.
+    ///
+    /// The buffers' contents are not the environment's memory: every element of every tensor
+    /// and of the action mask is overwritten, whatever `obs` held (an older observation, garbage
+    /// or nothing). Callers rely on it — the Python bindings hand one step's buffers to numpy
+    /// and pass recycled ones back — and `a2perf-pipeline`'s `env_buffer_contract` test checks
+    /// it for every built-in environment.
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut Observation) -> Result<(), EnvError>;
 
-    /// Applies `action`, writing the outcome into `out` (its observation buffers are reused; its
-    /// `info` should be cleared and refilled).
+    /// Applies `action`, writing the outcome into `out` (its observation buffers are reused and
+    /// wholly overwritten, as in [`reset_into`](Env::reset_into); its `info` should be cleared
+    /// and refilled).
     fn step_into(&mut self, action: &Action, out: &mut Step) -> Result<(), EnvError>;
 
     /// Gymnasium `reset`: starts an episode and returns its first observation.

@@ -15,6 +15,8 @@
 //! - [`resume`]: resume points, so that an interrupted training run continues exactly where it
 //!   stopped ([`TrainingContext::take_resume_state`], [`TrainingContext::progress_resumable`]).
 //! - [`alloc_count`]: a counting global allocator, to check that hot paths allocate nothing.
+//! - [`crew`]: worker threads for lockstep jobs (each part pinned to one thread, spin-then-sleep
+//!   between jobs), which the Python package's vector environments step with.
 //!
 //! ```
 //! use a2perf_core::{RngStream, Space};
@@ -31,6 +33,7 @@
 pub mod alloc_count;
 pub mod bytes;
 pub mod config;
+pub mod crew;
 pub mod env;
 pub mod meter;
 pub mod policy;

@@ -58,6 +58,7 @@ use a2perf_core::{
 use serde::{Deserialize, Serialize};
 
 pub mod arrow;
+pub mod bench;
 pub mod collect;
 pub mod external;
 pub mod generalize;

@@ -15,6 +15,9 @@
 The import name is ``a2perf_rs`` so that the original ``a2perf`` package can be installed beside it.
 """
 
+import json
+from typing import Any
+
 from . import _native, circuit, metrics
 from ._native import BackendError
 from .envs import A2PerfEnv, env_ids, env_params, register_all
@@ -34,11 +37,23 @@ __all__ = [
     "infer",
     "report",
     "metrics",
+    "bench",
     "chromium_unavailable_reason",
     "env_ids",
     "env_params",
     "register_all",
 ]
+
+
+def bench(env_id: str, steps: int = 10_000, seed: int = 0, **params: Any) -> dict[str, Any]:
+    """``a2perf bench`` in this process: steps ``env_id`` (with or without the ``a2perf/``
+    namespace) ``steps`` times with uniformly random legal actions, timing every native
+    ``step``; returns the report ``a2perf bench --json`` prints (``steps_per_second``,
+    ``step_latency_us`` p50/p90/p99, ``mean_step_us``, ``reset_time_us``, ``params``). The GIL is
+    released meanwhile. Timing the native step in the same process as a Python loop makes the
+    two comparable on a machine whose speed drifts."""
+    bare = env_id.split("/", 1)[1] if env_id.startswith("a2perf/") else env_id
+    return json.loads(_native.bench(bare, steps, seed, params))
 
 
 def chromium_unavailable_reason() -> str | None:

@@ -19,6 +19,11 @@ put the mask of the current state in ``info["action_mask"]`` (``np.int8``, 1 = l
 :meth:`A2PerfEnv.action_masks` (the method sb3-contrib's ``MaskablePPO`` calls). Observations stay
 exactly the Rust observation space; they carry no mask key.
 
+**Observations are not copied.** The arrays ``reset`` and ``step`` return are the buffers the
+Rust environment wrote; their numpy ``base`` owns the memory. They are never written again while
+anything references them (a view or memoryview included); released ones are reused for later
+steps, which every environment overwrites completely (tested for every id).
+
 **Illegal actions.** Gymnasium lets every element of the action space be stepped. An action the
 mask forbids is not applied: by default (``illegal_action="terminate"``) the episode terminates
 with ``illegal_action_reward`` (default: the circuit's ``infeasible_reward``, else -1) and

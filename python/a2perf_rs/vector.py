@@ -6,6 +6,11 @@ threads into preallocated numpy arrays; with ``copy=True`` (the default, as Gymn
 environments) each call returns copies of them, with ``copy=False`` the buffers themselves (valid
 until the next call).
 
+Threads: ``min(N, cores)`` in all — the caller's and the vector environment's own workers — each
+stepping a fixed, contiguous share of the environments (an environment stays on one thread, its
+state in that core's cache). Between steps the workers spin for up to 200 µs before sleeping, so
+an agent that returns quickly does not pay a thread wake-up per step.
+
 Semantics are Gymnasium 1.x's: ``reset(seed=s)`` seeds environment ``i`` with ``s + i`` (a list
 gives one seed per environment); later resets continue each environment's own random stream; the
 autoreset mode is next-step by default (``autoreset_mode=AutoresetMode.SAME_STEP`` is supported

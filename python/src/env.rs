@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
 use a2perf_core::{Action, Env, EnvSpec, Observation, Registry, Space, Step, Value};
-use numpy::{PyArray1, PyArrayDyn, PyArrayMethods};
+use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, npyffi};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};
@@ -68,13 +68,8 @@ impl IllegalAction {
     }
 }
 
-/// Builds environment `id` from Python keyword arguments; returns it with every parameter in
-/// force (defaults included).
-pub fn make_env(
-    id: &str,
-    kwargs: Option<&Bound<'_, PyDict>>,
-) -> PyResult<(Box<dyn Env>, BTreeMap<String, Value>)> {
-    let reg = registry();
+/// Python keyword arguments as environment parameters (typed, not yet checked against an id).
+pub fn env_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<BTreeMap<String, Value>> {
     let mut params = BTreeMap::new();
     if let Some(kw) = kwargs {
         for (k, v) in kw.iter() {
@@ -83,14 +78,28 @@ pub fn make_env(
             params.insert(key, value);
         }
     }
-    let kind_of = |key: &str| {
-        reg.env(id).ok().and_then(|e| {
-            e.params
-                .iter()
-                .find(|p| p.name == key)
-                .map(|p| p.kind.clone())
-        })
-    };
+    Ok(params)
+}
+
+/// The declared kind of parameter `key` of environment `id` (for [`registry_error`]).
+pub fn param_kind(id: &str, key: &str) -> Option<a2perf_core::ParamKind> {
+    registry().env(id).ok().and_then(|e| {
+        e.params
+            .iter()
+            .find(|p| p.name == key)
+            .map(|p| p.kind.clone())
+    })
+}
+
+/// Builds environment `id` from Python keyword arguments; returns it with every parameter in
+/// force (defaults included).
+pub fn make_env(
+    id: &str,
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<(Box<dyn Env>, BTreeMap<String, Value>)> {
+    let reg = registry();
+    let params = env_kwargs(kwargs)?;
+    let kind_of = |key: &str| param_kind(id, key);
     let resolved = reg
         .env_params(id, &params)
         .map_err(|e| registry_error(e, kind_of))?;
@@ -109,6 +118,8 @@ pub struct ObsLayout {
     pub shapes: Vec<Vec<usize>>,
     /// Number of floats of each tensor.
     pub dims: Vec<usize>,
+    /// Each shape in numpy's integer type.
+    pub npy_dims: Vec<Vec<npyffi::npy_intp>>,
 }
 
 impl ObsLayout {
@@ -138,7 +149,21 @@ impl ObsLayout {
             .iter()
             .map(|s: &Vec<usize>| s.iter().product())
             .collect();
-        Ok(Self { keys, shapes, dims })
+        let npy_dims = shapes
+            .iter()
+            .map(|s: &Vec<usize>| {
+                s.iter()
+                    .map(|&d| npyffi::npy_intp::try_from(d))
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .collect::<Result<_, _>>()
+            .map_err(|_| PyRuntimeError::new_err("observation dimension too large for numpy"))?;
+        Ok(Self {
+            keys,
+            shapes,
+            dims,
+            npy_dims,
+        })
     }
 
     /// Checks that the environment wrote every tensor at its declared size.
@@ -217,6 +242,156 @@ impl ObsLayout {
                 Ok(d.into_any())
             }
         }
+    }
+}
+
+/// Owns the memory of one observation array handed to Python without a copy: the array's numpy
+/// `base`. Not constructible from Python.
+#[pyclass(module = "a2perf_rs._native", name = "ObservationBuffer")]
+pub struct ObsBuffer {
+    data: Vec<f32>,
+}
+
+/// A C-contiguous, writeable float32 array of shape `dims` over `data`, kept alive by `owner`
+/// (its numpy `base`).
+///
+/// # Safety
+/// `data` points to the product of `dims` floats, owned by `owner` and neither freed nor moved
+/// while `owner` is referenced by anything else than its creator.
+unsafe fn f32_array_over<'py>(
+    py: Python<'py>,
+    dims: &[npyffi::npy_intp],
+    data: *const f32,
+    owner: Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    use numpy::{Element, PyArrayDescrMethods};
+    let nd = std::ffi::c_int::try_from(dims.len())
+        .map_err(|_| PyRuntimeError::new_err("too many dimensions"))?;
+    // SAFETY: numpy's C API as `PyArray::borrow_from_array` uses it, with NULL strides (C order)
+    // and the dims and data of the caller's contract.
+    let array = unsafe {
+        npyffi::PY_ARRAY_API.PyArray_NewFromDescr(
+            py,
+            npyffi::get_type_object(py, npyffi::NpyTypes::PyArray_Type),
+            f32::get_dtype(py).into_dtype_ptr(),
+            nd,
+            dims.as_ptr().cast_mut(),
+            std::ptr::null_mut(),
+            data.cast_mut().cast(),
+            npyffi::NPY_ARRAY_WRITEABLE,
+            std::ptr::null_mut(),
+        )
+    };
+    if array.is_null() {
+        return Err(PyErr::fetch(py));
+    }
+    // SAFETY: `array` is a new reference we own; `PyArray_SetBaseObject` steals the reference to
+    // `owner` whatever it returns.
+    unsafe {
+        let array = Bound::from_owned_ptr(py, array);
+        if npyffi::PY_ARRAY_API.PyArray_SetBaseObject(py, array.as_ptr().cast(), owner.into_ptr())
+            < 0
+        {
+            return Err(PyErr::fetch(py));
+        }
+        Ok(array)
+    }
+}
+
+/// Hands an environment's observation buffers to numpy without copying them, and recycles the
+/// buffers of observations Python has released.
+///
+/// After a step, each tensor's `Vec` moves into an [`ObsBuffer`] that becomes the `base` of the
+/// returned numpy array (no copy). Before the next step the environment needs buffers again: a
+/// set whose every `ObsBuffer` is referenced by this recycler alone (reference count 1: no array,
+/// view or memoryview can reach it) is lent back, still holding an older observation. That is
+/// sound because every environment overwrites its whole observation (the contract of
+/// [`a2perf_core::Env::reset_into`], tested for every built-in id); when no set is free (Python
+/// keeps its observations), fresh zeroed buffers are allocated. At most [`ObsRecycler::SETS`] sets
+/// are tracked; older ones are forgotten and live as long as Python keeps them.
+#[derive(Default)]
+pub struct ObsRecycler {
+    /// Sets handed to Python, oldest first.
+    sets: Vec<Vec<Py<ObsBuffer>>>,
+    /// The emptied `ObsBuffer`s of the set lent for the current call (refilled by `hand_out`).
+    spare: Option<Vec<Py<ObsBuffer>>>,
+}
+
+impl ObsRecycler {
+    /// How many handed-out sets are tracked for reuse.
+    pub const SETS: usize = 4;
+
+    /// Gives `obs` buffers of the sizes `layout` declares, taken from a set Python has released
+    /// when there is one. Tensors that already hold their data (or an observation the
+    /// environment has not built yet) are left alone.
+    pub fn lend(&mut self, py: Python<'_>, layout: &ObsLayout, obs: &mut Observation) {
+        if obs.tensors.len() != layout.dims.len()
+            || obs
+                .tensors
+                .iter()
+                .zip(&layout.dims)
+                .all(|(t, d)| t.data.len() == *d)
+        {
+            return;
+        }
+        // SAFETY: reading the reference count of a live object while attached to the
+        // interpreter (`py`).
+        let only_here = |b: &Py<ObsBuffer>| unsafe { pyo3::ffi::Py_REFCNT(b.as_ptr()) } == 1;
+        let free = self.sets.iter().position(|set| set.iter().all(only_here));
+        match free {
+            Some(i) => {
+                let set = self.sets.remove(i);
+                for (t, b) in obs.tensors.iter_mut().zip(&set) {
+                    let mut b = b.bind(py).borrow_mut();
+                    if t.data.is_empty() {
+                        t.data = std::mem::take(&mut b.data);
+                    }
+                }
+                self.spare = Some(set);
+            }
+            None => {
+                for (t, d) in obs.tensors.iter_mut().zip(&layout.dims) {
+                    if t.data.len() != *d {
+                        t.data = vec![0.0; *d];
+                    }
+                }
+            }
+        }
+    }
+
+    /// The Python observation over `obs`'s buffers, which move out of `obs` (no copy).
+    pub fn hand_out<'py>(
+        &mut self,
+        py: Python<'py>,
+        layout: &ObsLayout,
+        obs: &mut Observation,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        layout.check(obs)?;
+        let set = match self.spare.take() {
+            Some(set) => set,
+            None => (0..layout.dims.len())
+                .map(|_| Py::new(py, ObsBuffer { data: Vec::new() }))
+                .collect::<PyResult<_>>()?,
+        };
+        let mut arrays = Vec::with_capacity(set.len());
+        for ((t, b), dims) in obs.tensors.iter_mut().zip(&set).zip(&layout.npy_dims) {
+            let owner = b.bind(py);
+            let mut buf = owner.borrow_mut();
+            buf.data = std::mem::take(&mut t.data);
+            // SAFETY: `check` above: the buffer holds the product of `dims` floats. `owner`
+            // owns the memory and becomes the array's base; the `Vec` is neither moved out nor
+            // reallocated while any object other than this recycler references `owner` (`lend`
+            // takes it back only at reference count 1).
+            let array =
+                unsafe { f32_array_over(py, dims, buf.data.as_ptr(), owner.clone().into_any())? };
+            drop(buf);
+            arrays.push(array);
+        }
+        self.sets.push(set);
+        if self.sets.len() > Self::SETS {
+            self.sets.remove(0);
+        }
+        layout.wrap(py, arrays)
     }
 }
 
@@ -312,6 +487,16 @@ impl EpisodeCore {
 
     /// One step; the outcome is in `self.step`.
     pub fn step(&mut self, action: &Action) -> PyResult<()> {
+        if self.admit(action)? {
+            self.step_env(action)?;
+        }
+        Ok(())
+    }
+
+    /// The checks before a step: refuses a step that needs a reset, and handles an action the
+    /// mask forbids (an error, or the terminated outcome in `self.step`). `Ok(true)`: the
+    /// environment must now be stepped with [`EpisodeCore::step_env`].
+    pub fn admit(&mut self, action: &Action) -> PyResult<bool> {
         if self.needs_reset {
             return Err(PyRuntimeError::new_err(
                 "step() called before reset() or after the episode ended (terminated or \
@@ -336,10 +521,15 @@ impl EpisodeCore {
                     self.step.info.clear();
                     self.illegal = true;
                     self.needs_reset = true;
-                    return Ok(());
+                    return Ok(false);
                 }
             }
         }
+        Ok(true)
+    }
+
+    /// Steps the environment with an action [`EpisodeCore::admit`] accepted.
+    pub fn step_env(&mut self, action: &Action) -> PyResult<()> {
         // An error leaves the environment in an unknown state: it must be reset.
         self.needs_reset = true;
         guard("step", || {
@@ -358,10 +548,10 @@ impl EpisodeCore {
     /// The info dict of the last reset/step: the environment's scalar diagnostics,
     /// `action_mask` (int8, 1 = legal) when the observation carries one, and
     /// `illegal_action = True` after a masked-out action.
-    pub fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    pub fn info<'py>(&self, py: Python<'py>, keys: &mut InfoKeys) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         for (k, v) in self.step.info.iter() {
-            d.set_item(k, v)?;
+            d.set_item(keys.get(py, k), v)?;
         }
         if let Some(mask) = &self.step.observation.action_mask {
             d.set_item(pyo3::intern!(py, "action_mask"), mask_to_py(py, mask))?;
@@ -373,16 +563,28 @@ impl EpisodeCore {
     }
 }
 
+/// The Python strings of an environment's info keys, made once (an environment reports the
+/// same few keys at every step; a new string per key and step would be hashed every time).
+#[derive(Default)]
+pub struct InfoKeys(Vec<(String, Py<PyString>)>);
+
+impl InfoKeys {
+    /// The Python string `key`.
+    pub fn get<'py>(&mut self, py: Python<'py>, key: &str) -> Bound<'py, PyString> {
+        if let Some((_, s)) = self.0.iter().find(|(k, _)| k == key) {
+            return s.bind(py).clone();
+        }
+        let s = PyString::new(py, key);
+        self.0.push((key.to_string(), s.clone().unbind()));
+        s
+    }
+}
+
 /// A mask as an int8 array (Gymnasium's `Discrete.sample(mask=…)` type).
 pub fn mask_to_py<'py>(py: Python<'py>, mask: &[bool]) -> Bound<'py, PyArray1<i8>> {
-    let arr = PyArray1::<i8>::zeros(py, mask.len(), false);
-    // SAFETY: the array was just created here and is not shared yet.
-    if let Ok(s) = unsafe { arr.as_slice_mut() } {
-        for (o, m) in s.iter_mut().zip(mask) {
-            *o = i8::from(*m);
-        }
-    }
-    arr
+    // SAFETY: `bool` has the size and alignment of `i8` and only the values 0 and 1.
+    let bytes = unsafe { std::slice::from_raw_parts(mask.as_ptr().cast::<i8>(), mask.len()) };
+    PyArray1::from_slice(py, bytes)
 }
 
 /// The spec as a Python dict.
@@ -415,15 +617,27 @@ pub fn spec_to_py<'py>(
 /// A registered environment driven from Python: `a2perf_rs._native.Env(env_id, params)`.
 #[pyclass(module = "a2perf_rs._native", name = "Env")]
 pub struct PyEnv {
-    core: Mutex<Option<EpisodeCore>>,
+    core: Mutex<Option<Single>>,
     layout: ObsLayout,
     action: ActionSpec,
     spec: EnvSpec,
     params: BTreeMap<String, Value>,
 }
 
+/// The state behind a [`PyEnv`].
+struct Single {
+    core: EpisodeCore,
+    /// Moves observations to numpy without copies.
+    recycler: ObsRecycler,
+    /// The last observation returned (an illegal action returns a copy of it: the environment
+    /// does not step, and its buffers now belong to that observation).
+    last_obs: Option<Py<PyAny>>,
+    /// Its info keys as Python strings.
+    keys: InfoKeys,
+}
+
 impl PyEnv {
-    fn core(&self) -> PyResult<MutexGuard<'_, Option<EpisodeCore>>> {
+    fn core(&self) -> PyResult<MutexGuard<'_, Option<Single>>> {
         self.core.lock().map_err(|_| {
             PyRuntimeError::new_err("the environment is unusable after an earlier failure")
         })
@@ -459,7 +673,12 @@ impl PyEnv {
         Ok(Self {
             layout: ObsLayout::of(py, &spec.observation_space)?,
             action: ActionSpec::of(&spec.action_space)?,
-            core: Mutex::new(Some(core)),
+            core: Mutex::new(Some(Single {
+                core,
+                recycler: ObsRecycler::default(),
+                last_obs: None,
+                keys: InfoKeys::default(),
+            })),
             spec,
             params: resolved,
         })
@@ -474,10 +693,16 @@ impl PyEnv {
     #[pyo3(signature = (seed=None))]
     fn reset<'py>(&self, py: Python<'py>, seed: Option<u64>) -> PyResult<Bound<'py, PyTuple>> {
         let mut guard = self.core()?;
-        let core = guard.as_mut().ok_or_else(closed)?;
-        py.detach(|| core.reset(seed))?;
-        let obs = self.layout.to_py(py, &core.step.observation)?;
-        PyTuple::new(py, [obs, core.info(py)?.into_any()])
+        let st = guard.as_mut().ok_or_else(closed)?;
+        st.last_obs = None;
+        st.recycler
+            .lend(py, &self.layout, &mut st.core.step.observation);
+        py.detach(|| st.core.reset(seed))?;
+        let obs = st
+            .recycler
+            .hand_out(py, &self.layout, &mut st.core.step.observation)?;
+        st.last_obs = Some(obs.clone().unbind());
+        PyTuple::new(py, [obs, st.core.info(py, &mut st.keys)?.into_any()])
     }
 
     /// Applies `action`; returns `(observation, reward, terminated, truncated, info)`.
@@ -487,18 +712,35 @@ impl PyEnv {
         action: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let mut guard = self.core()?;
-        let core = guard.as_mut().ok_or_else(closed)?;
+        let st = guard.as_mut().ok_or_else(closed)?;
         let mut a = match self.action {
             ActionSpec::Discrete(_) => Action::Discrete(0),
             ActionSpec::Box { .. } => Action::Continuous(Vec::new()),
         };
         self.action.parse(action, &mut a)?;
-        py.detach(|| core.step(&a))?;
-        let s = &core.step;
+        let obs = if st.core.admit(&a)? {
+            st.last_obs = None;
+            st.recycler
+                .lend(py, &self.layout, &mut st.core.step.observation);
+            py.detach(|| st.core.step_env(&a))?;
+            let obs = st
+                .recycler
+                .hand_out(py, &self.layout, &mut st.core.step.observation)?;
+            st.last_obs = Some(obs.clone().unbind());
+            obs
+        } else {
+            // Illegal action: the state, hence the observation, is unchanged.
+            let last = st
+                .last_obs
+                .as_ref()
+                .ok_or_else(|| PyRuntimeError::new_err("no observation to repeat"))?;
+            copy_obs(last.bind(py))?
+        };
+        let s = &st.core.step;
         PyTuple::new(
             py,
             [
-                self.layout.to_py(py, &s.observation)?,
+                obs,
                 s.reward.into_pyobject(py)?.into_any(),
                 pyo3::types::PyBool::new(py, s.terminated)
                     .to_owned()
@@ -506,7 +748,7 @@ impl PyEnv {
                 pyo3::types::PyBool::new(py, s.truncated)
                     .to_owned()
                     .into_any(),
-                core.info(py)?.into_any(),
+                st.core.info(py, &mut st.keys)?.into_any(),
             ],
         )
     }
@@ -514,8 +756,9 @@ impl PyEnv {
     /// The current action mask (int8, 1 = legal), or `None` when every action is legal.
     fn action_mask<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArray1<i8>>>> {
         let guard = self.core()?;
-        let core = guard.as_ref().ok_or_else(closed)?;
-        Ok(core
+        let st = guard.as_ref().ok_or_else(closed)?;
+        Ok(st
+            .core
             .step
             .observation
             .action_mask
@@ -526,8 +769,8 @@ impl PyEnv {
     /// Releases the environment's resources (e.g. its Chromium browser). Closing twice is fine.
     fn close(&self, py: Python<'_>) -> PyResult<()> {
         let mut guard = self.core()?;
-        if let Some(mut core) = guard.take() {
-            py.detach(|| guard_close(&mut core))?;
+        if let Some(mut st) = guard.take() {
+            py.detach(|| guard_close(&mut st.core))?;
         }
         Ok(())
     }
@@ -536,6 +779,22 @@ impl PyEnv {
     #[getter]
     fn closed(&self) -> PyResult<bool> {
         Ok(self.core()?.is_none())
+    }
+}
+
+/// A copy of an observation: a dict of arrays or one array.
+fn copy_obs<'py>(obs: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let py = obs.py();
+    let copy = pyo3::intern!(py, "copy");
+    match obs.cast::<PyDict>() {
+        Ok(d) => {
+            let out = PyDict::new(py);
+            for (k, v) in d.iter() {
+                out.set_item(k, v.call_method0(copy)?)?;
+            }
+            Ok(out.into_any())
+        }
+        Err(_) => obs.call_method0(copy),
     }
 }
 

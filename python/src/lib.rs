@@ -16,7 +16,7 @@
 //! harness from `a2perf_pipeline::external` and the pipelines.
 
 use pyo3::prelude::*;
-use pyo3::types::{PyList, PyTuple};
+use pyo3::types::{PyDict, PyList, PyTuple};
 
 pub mod circuit;
 pub mod convert;
@@ -50,6 +50,38 @@ fn env_entries(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
     Ok(out)
 }
 
+/// `a2perf bench` in this process: the report as JSON (`a2perf_rs.bench` parses it).
+#[pyfunction(name = "bench")]
+#[pyo3(signature = (env_id, steps, seed, params=None))]
+fn bench_env(
+    py: Python<'_>,
+    env_id: &str,
+    steps: u64,
+    seed: u64,
+    params: Option<&Bound<'_, PyDict>>,
+) -> PyResult<String> {
+    let reg = env::registry();
+    let values = env::env_kwargs(params)?;
+    let kind_of = |key: &str| env::param_kind(env_id, key);
+    let report = py.detach(|| {
+        errors::guard("bench", || {
+            a2perf_pipeline::bench::bench_env(reg, env_id, &values, steps, seed).map_err(
+                |e| match e {
+                    a2perf_pipeline::bench::BenchError::Registry(e) => {
+                        errors::registry_error(e, kind_of)
+                    }
+                    a2perf_pipeline::bench::BenchError::Env { source, .. } => {
+                        errors::env_error(source)
+                    }
+                    other => pyo3::exceptions::PyValueError::new_err(other.to_string()),
+                },
+            )
+        })
+    })?;
+    serde_json::to_string(&report)
+        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
+}
+
 /// `None` when Chromium and chromedriver are installed, else the reason they cannot be used.
 #[pyfunction]
 fn chromium_unavailable_reason() -> Option<String> {
@@ -64,6 +96,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("BackendError", m.py().get_type::<errors::BackendError>())?;
     m.add_function(wrap_pyfunction!(env_entries, m)?)?;
     m.add_function(wrap_pyfunction!(chromium_unavailable_reason, m)?)?;
+    m.add_function(wrap_pyfunction!(bench_env, m)?)?;
     m.add_class::<env::PyEnv>()?;
     m.add_class::<vec_env::PyVecEnv>()?;
     metrics::register(m)?;

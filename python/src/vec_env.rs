@@ -2,14 +2,17 @@
 //! `a2perf_rs.vector.A2PerfVectorEnv`).
 //!
 //! Observations, rewards, flags and masks are written straight into preallocated numpy arrays;
-//! each environment's work runs on rayon's pool. Semantics are Gymnasium 1.x's: `reset(seed=s)`
+//! the environments are split into one contiguous chunk per thread (the caller's and the vector
+//! environment's own workers, an [`a2perf_core::crew::Crew`]: `min(N, cores)` threads in all),
+//! each environment always on the same thread. Semantics are Gymnasium 1.x's: `reset(seed=s)`
 //! seeds environment `i` with `s + i` (as `SyncVectorEnv` does), later resets continue each
 //! environment's own stream, and the autoreset mode is next-step (default) or same-step. So N
 //! single environments reset with seeds `s + i` and stepped with the same actions produce the same
 //! trajectories, which the tests check.
 
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
+use a2perf_core::crew::Crew;
 use a2perf_core::{Action, Observation};
 use numpy::{
     PyArray1, PyArray2, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
@@ -18,7 +21,6 @@ use numpy::{
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
-use rayon::prelude::*;
 
 use crate::convert::{ActionSpec, type_name_of};
 use crate::env::{EpisodeCore, IllegalAction, ObsLayout, guard_close, make_env, spec_to_py};
@@ -78,6 +80,8 @@ pub struct PyVecEnv {
     params: std::collections::BTreeMap<String, a2perf_core::Value>,
     autoreset: Autoreset,
     copy: bool,
+    /// The threads beside the caller's that step the environments (`None`: one environment).
+    workers: Option<Crew>,
 }
 
 fn write_obs(layout: &ObsLayout, obs: &Observation, out: &mut SlotOut<'_>) -> PyResult<()> {
@@ -112,6 +116,67 @@ fn write_slot(layout: &ObsLayout, slot: &Slot, out: &mut SlotOut<'_>) -> PyResul
         }
     }
     Ok(())
+}
+
+/// Runs `one` over `slots` (environments `first..`) in order, stopping at the first error.
+fn run_chunk<F>(first: usize, slots: &mut [Slot], outs: &mut [SlotOut<'_>], one: &F) -> PyResult<()>
+where
+    F: Fn(usize, &mut Slot, &mut SlotOut<'_>) -> PyResult<()>,
+{
+    slots
+        .iter_mut()
+        .zip(outs.iter_mut())
+        .enumerate()
+        .try_for_each(|(i, (slot, out))| one(first + i, slot, out))
+}
+
+/// Runs `one` over the slots split into contiguous chunks, one per thread: the calling thread
+/// takes the first chunk and worker `k` of `crew` always chunk `k`. An environment so stays on
+/// one thread from step to step (its state stays in that core's cache) and the caller works
+/// instead of waiting. Returns the error of the lowest-numbered failing environment's chunk.
+fn run_pinned<F>(crew: &Crew, slots: &mut [Slot], outs: &mut [SlotOut<'_>], one: &F) -> PyResult<()>
+where
+    F: Fn(usize, &mut Slot, &mut SlotOut<'_>) -> PyResult<()> + Sync,
+{
+    let n = slots.len();
+    let parts = (crew.workers() + 1).min(n);
+    let mut chunks = Vec::with_capacity(parts);
+    let (mut slots, mut outs) = (slots, outs);
+    for k in 0..parts {
+        let len = (k + 1) * n / parts - k * n / parts;
+        let (s, s_rest) = std::mem::take(&mut slots).split_at_mut(len);
+        let (o, o_rest) = std::mem::take(&mut outs).split_at_mut(len);
+        chunks.push(Mutex::new((k * n / parts, s, o, Ok(()))));
+        (slots, outs) = (s_rest, o_rest);
+    }
+    let finished = crew.run(&|k| {
+        if let Some(chunk) = chunks.get(k) {
+            let mut c = chunk.lock().unwrap_or_else(PoisonError::into_inner);
+            let (first, s, o, result) = &mut *c;
+            *result = run_chunk(*first, s, o, one);
+        }
+    });
+    if !finished {
+        return Err(PyRuntimeError::new_err(
+            "a worker thread of the vector environment panicked; reset the environments",
+        ));
+    }
+    chunks
+        .into_iter()
+        .try_for_each(|c| c.into_inner().unwrap_or_else(PoisonError::into_inner).3)
+}
+
+/// The worker threads of `n` environments: one fewer than the threads that step them,
+/// `min(n, available cores)`; `None` when that is one thread (the caller's).
+fn worker_crew(n: usize) -> PyResult<Option<Crew>> {
+    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get);
+    let threads = n.min(cores);
+    if threads <= 1 {
+        return Ok(None);
+    }
+    Crew::new(threads - 1, "a2perf-vec")
+        .map(Some)
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start the worker threads: {e}")))
 }
 
 impl PyVecEnv {
@@ -184,21 +249,10 @@ impl PyVecEnv {
                 work(i, slot, &actions[i])?;
                 write_slot(layout, slot, out)
             };
-            py.detach(|| {
-                if n == 1 {
-                    // No thread hand-off for a single environment.
-                    st.slots
-                        .iter_mut()
-                        .zip(outs.iter_mut())
-                        .enumerate()
-                        .try_for_each(|(i, (slot, out))| one(i, slot, out))
-                } else {
-                    st.slots
-                        .par_iter_mut()
-                        .zip(outs.par_iter_mut())
-                        .enumerate()
-                        .try_for_each(|(i, (slot, out))| one(i, slot, out))
-                }
+            py.detach(|| match &self.workers {
+                // No thread hand-off for a single environment.
+                None => run_chunk(0, &mut st.slots, &mut outs, &one),
+                Some(pool) => run_pinned(pool, &mut st.slots, &mut outs, &one),
             })?;
         }
         let copy = |a: Bound<'py, PyAny>| -> PyResult<Bound<'py, PyAny>> {
@@ -469,6 +523,7 @@ impl PyVecEnv {
             params,
             autoreset,
             copy,
+            workers: worker_crew(num_envs)?,
         })
     }
 

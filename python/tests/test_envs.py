@@ -134,8 +134,12 @@ def test_illegal_actions_terminate_by_default_or_raise() -> None:
     env = A2PerfEnv("WebNavigation-Difficulty-01-v0", num_websites=1)
     _, info = env.reset(seed=0)
     illegal = int(np.flatnonzero(info["action_mask"] == 0)[0])
+    before, _ = env.reset(seed=0)
     obs, reward, terminated, truncated, info = env.step(illegal)
     assert terminated and not truncated and reward == -1.0 and info["illegal_action"] is True
+    # The state did not change, so neither did the observation; it is a copy, not the same memory.
+    for k in before:
+        assert np.array_equal(obs[k], before[k]) and not np.shares_memory(obs[k], before[k])
     circuit = A2PerfEnv("CircuitTraining-Synthetic-Small-v0", infeasible_reward=-7.5)
     _, info = circuit.reset(seed=0)
     bad = int(np.flatnonzero(info["action_mask"] == 0)[0])
@@ -146,6 +150,44 @@ def test_illegal_actions_terminate_by_default_or_raise() -> None:
         strict.step(illegal)
     with pytest.raises(ValueError, match="did you mean `raise`"):
         A2PerfEnv("WebNavigation-Difficulty-01-v0", illegal_action="rase")
+
+
+def test_observations_are_handed_over_without_copies_and_never_overwritten() -> None:
+    """A step's buffers become the numpy arrays (no copy); they are reused for a later step only
+    once Python holds no reference to them (not even a view), and reuse changes no value."""
+
+    def run(keep: bool) -> tuple[list, list, set, list]:
+        env = A2PerfEnv("WebNavigation-Difficulty-01-v0")
+        obs, info = env.reset(seed=3)
+        rng = np.random.default_rng(0)
+        kept, snapshots, buffers, views = [], [], set(), []
+        for step in range(80):
+            a = int(rng.choice(np.flatnonzero(info["action_mask"])))
+            obs, _, terminated, truncated, info = env.step(a)
+            snapshots.append({k: v.copy() for k, v in obs.items()})
+            buffers.add(obs["dom_tokens"].ctypes.data)
+            if keep:
+                kept.append(obs)
+            elif step % 20 == 5:
+                # Only a view (and a memoryview) of the observation survives.
+                views.append((obs["dom_features"][1:], memoryview(obs["dom_mask"]), step))
+            if terminated or truncated:
+                obs, info = env.reset()
+        return kept, snapshots, buffers, views
+
+    kept, snapshots_kept, buffers_kept, _ = run(keep=True)
+    _, snapshots_dropped, buffers_dropped, views = run(keep=False)
+    assert len(buffers_kept) == 80, "a held observation's memory was reused"
+    # Two sets in turn (the caller's current observation, and the one being written), plus one
+    # per observation that a surviving view pins.
+    assert len(buffers_dropped) <= 2 + len(views), f"buffers not recycled: {len(buffers_dropped)}"
+    for obs, snap in zip(kept, snapshots_kept):
+        assert all(np.array_equal(obs[k], snap[k]) for k in snap)
+    for a, b in zip(snapshots_kept, snapshots_dropped):
+        assert all(np.array_equal(a[k], b[k]) for k in a)
+    for features, mask, step in views:
+        assert np.array_equal(features, snapshots_dropped[step]["dom_features"][1:])
+        assert np.array_equal(np.asarray(mask), snapshots_dropped[step]["dom_mask"])
 
 
 def test_a_circuit_episode_ends_with_the_proxy_cost() -> None:
@@ -187,3 +229,19 @@ def test_close_releases_the_chromium_backend() -> None:
     env.close()  # twice is fine
     with pytest.raises(RuntimeError, match="closed"):
         env.unwrapped.reset(seed=0)
+
+
+def test_bench_runs_the_native_benchmark_in_this_process() -> None:
+    report = a2perf_rs.bench("a2perf/WebNavigation-Difficulty-01-v0", steps=300, seed=4)
+    assert report["env_id"] == "WebNavigation-Difficulty-01-v0" and report["steps"] == 300
+    assert 0 < report["step_latency_us"]["p50"] <= report["step_latency_us"]["p99"]
+    assert report["steps_per_second"] > 0 and report["params"]["num_websites"] >= 1
+    # Same seed, same trajectory: the same episodes.
+    again = a2perf_rs.bench("WebNavigation-Difficulty-01-v0", steps=300, seed=4)
+    assert again["episodes"] == report["episodes"]
+    with pytest.raises(ValueError, match="did you mean"):
+        a2perf_rs.bench("WebNavigation-Difficulty-1-v0", steps=10)
+    with pytest.raises(TypeError, match="num_website"):
+        a2perf_rs.bench("WebNavigation-Difficulty-01-v0", steps=10, num_website=3)
+    with pytest.raises(ValueError, match="at least 1"):
+        a2perf_rs.bench("WebNavigation-Difficulty-01-v0", steps=0)
