@@ -9,6 +9,10 @@
 //! worker spinning through that gap gave 5–12% more env steps/s than rayon's pool with the same
 //! pinning. The spin is bounded by [`SPIN`], so an agent that thinks longer between steps costs
 //! one core that long and no more.
+//!
+//! Threads do not survive `fork()`: in a child process the crew has no workers, so
+//! [`Crew::run`] notices the new process ([`Crew::forked`]) and runs every part on the calling
+//! thread instead of waiting forever for workers that do not exist there.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -61,6 +65,8 @@ struct Shared {
 /// ```
 pub struct Crew {
     workers: Vec<(Arc<Shared>, Option<JoinHandle<()>>)>,
+    /// The process the workers were started in.
+    pid: u32,
 }
 
 impl Crew {
@@ -81,7 +87,16 @@ impl Crew {
                 .spawn(move || work(k, &mine))?;
             workers.push((shared, Some(handle)));
         }
-        Ok(Self { workers })
+        Ok(Self {
+            workers,
+            pid: std::process::id(),
+        })
+    }
+
+    /// Whether this crew was started in another process (it was inherited through `fork()`),
+    /// where its worker threads do not exist: [`Crew::run`] then runs every part itself.
+    pub fn forked(&self) -> bool {
+        std::process::id() != self.pid
     }
 
     /// Number of worker threads (parts run beside the caller's).
@@ -91,7 +106,19 @@ impl Crew {
 
     /// Runs `job(0)` on this thread and `job(k)` on worker `k`, returning when all are done.
     /// Returns `false` when a worker's part panicked (the panic is not propagated).
+    ///
+    /// In a process forked from the one that started the crew, every part runs on this thread,
+    /// one after another (a panic in a part `k ≥ 1` is still caught and reported as `false`).
     pub fn run<'a>(&self, job: &'a (dyn Fn(usize) + Sync + 'a)) -> bool {
+        if self.forked() {
+            job(0);
+            // Every part runs, also after one has panicked, as on the workers.
+            let mut all_ok = true;
+            for k in 1..=self.workers.len() {
+                all_ok &= catch_unwind(AssertUnwindSafe(|| job(k))).is_ok();
+            }
+            return all_ok;
+        }
         let short: *const (dyn Fn(usize) + Sync + 'a) = job;
         // SAFETY: only the lifetime is erased; `Wait` below keeps this call from returning or
         // unwinding before every worker has finished the job.
@@ -129,6 +156,14 @@ impl Drop for Wait<'_> {
 
 impl Drop for Crew {
     fn drop(&mut self) {
+        if self.forked() {
+            // The workers live in the parent process: nothing to stop or join here, and no
+            // thread call on their handles (they name threads of another process).
+            for (_, handle) in &mut self.workers {
+                std::mem::forget(handle.take());
+            }
+            return;
+        }
         for (shared, handle) in &mut self.workers {
             shared.stop.store(true, Ordering::Release);
             if let Some(h) = handle.take() {
@@ -214,6 +249,30 @@ mod tests {
         assert_eq!(count.into_inner(), 800);
         let names = names.into_inner().unwrap();
         assert_eq!(&names[1..], ["test-crew-1", "test-crew-2", "test-crew-3"]);
+    }
+
+    #[test]
+    fn a_crew_inherited_by_a_forked_process_runs_every_part_on_the_caller() {
+        let mut crew = Crew::new(2, "test-crew").unwrap();
+        assert!(!crew.forked());
+        // What a child process sees: the workers belong to another process id.
+        crew.pid = crew.pid.wrapping_add(1);
+        assert!(crew.forked());
+        let me = thread::current().id();
+        let ran = Mutex::new(Vec::new());
+        assert!(crew.run(&|k| {
+            assert_eq!(
+                thread::current().id(),
+                me,
+                "part {k} left the caller's thread"
+            );
+            ran.lock().unwrap().push(k);
+        }));
+        assert_eq!(ran.into_inner().unwrap(), [0, 1, 2]);
+        assert!(!crew.run(&|k| assert_ne!(k, 2, "part 2 fails")));
+        // Dropping must not wait for the (parent's) workers; give them back their pid so that
+        // this test's real threads are stopped and joined.
+        crew.pid = std::process::id();
     }
 
     #[test]

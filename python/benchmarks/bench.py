@@ -4,7 +4,7 @@
 
 Prints one JSON object. The native figures come from `a2perf_rs.bench` (the loop of `a2perf bench`,
 run in this process so that native and Python rounds can alternate); the `a2perf` binary (default:
-$CARGO_TARGET_DIR/release/a2perf) gives one cross-check and the two-process ceiling;
+$CARGO_TARGET_DIR/release/a2perf) gives one cross-check;
 ../shared/data gives the Ariane133 placement cost. The load average is
 recorded: on a shared machine the figures are only comparable within one run.
 """
@@ -15,11 +15,13 @@ import argparse
 import json
 import os
 import subprocess
+import threading
 import time
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 import a2perf_rs
 from a2perf_rs import A2PerfEnv
@@ -69,9 +71,9 @@ def web_step_us(steps: int) -> tuple[float, float]:
 
 
 def vector_steps_per_s(make, n: int, steps: int, zero: bool = False) -> float:
-    """Env steps/s of a vector env. Random uniform actions topple the robot every ~10 steps, so
-    step times vary a lot (contacts) and lockstep stepping waits for the slowest env; zero actions
-    (standing, the fixed-pose baseline) give near-uniform step times."""
+    """Env steps/s of a vector env (one run: absolute figures, for the README's table). Random
+    uniform actions topple the robot every ~10 steps, so in next-step mode every ~10th step of
+    an env is a cheap autoreset step; zero actions (standing) never end an episode early."""
     venv = make(n)
     rng = np.random.default_rng(0)
     low, high = venv.single_action_space.low, venv.single_action_space.high
@@ -88,24 +90,46 @@ def vector_steps_per_s(make, n: int, steps: int, zero: bool = False) -> float:
 
 
 def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
-    """make_vec N = 2 over N = 1 (and over a single `gym.make` env), measured in interleaved
-    blocks of `per` steps so that all three see the same machine: on a shared VM one core's speed
-    drifts by tens of percent within seconds, which separate runs turn into noise."""
+    """make_vec N = 2 against one environment, measured in interleaved blocks of `per` steps per
+    arm (order rotated) so that every arm sees the same machine: on a shared VM a core's speed
+    drifts by tens of percent within seconds, which separate runs turn into noise. The arms:
+
+    - `single`: a `gym.make` env, reset by hand (a single env's steps/s: resets take time but
+      are not steps);
+    - `vec1`, `vec2`: make_vec N = 1, 2, next-step autoreset (the default), counted as Gymnasium
+      and every RL library count a vector env: N steps per call, autoreset steps included;
+    - `vec2_same_step`: make_vec N = 2 with same-step autoreset, where every step is a
+      transition (the reset happens inside the step that ended the episode);
+    - `free1`, `free2`: the native loop of `a2perf bench` (`a2perf_rs.bench`, GIL released) on
+      one thread, and on two threads at once: what this machine gives two independent threads
+      of this workload at that moment — the ceiling of any N = 2 vector env.
+
+    With random actions DogPace episodes last ~10 steps, so in next-step mode about one step in
+    ten of each env is an autoreset step (no transition): `transitions_per_s` leaves them out."""
     dog = f"a2perf/{DOG}"
-    vec = {n: gym.make_vec(dog, num_envs=n, vectorization_mode="vector_entry_point") for n in (1, 2)}
+    make = lambda n, **kw: gym.make_vec(dog, num_envs=n, vectorization_mode="vector_entry_point", **kw)  # noqa: E731
+    vec = {"vec1": make(1), "vec2": make(2), "vec2_same_step": make(2, autoreset_mode=AutoresetMode.SAME_STEP)}
     single = gym.make(dog)
     rng = np.random.default_rng(0)
     low, high = single.action_space.low, single.action_space.high
     for v in vec.values():
         v.reset(seed=0)
     single.reset(seed=0)
-    seconds = {"vec1": 0.0, "vec2": 0.0, "single": 0.0}
-    arms = list(seconds)
-    block_ratios = []
+    arms = ["single", *vec, "free1", "free2"]
+    width = {arm: 2 if arm.endswith(("2", "same_step")) else 1 for arm in arms}
+    seconds = dict.fromkeys(arms, 0.0)
+    transitions = dict.fromkeys(vec, 0)
+    ended = {arm: np.zeros(width[arm], bool) for arm in vec}
+    block_rates: dict[str, list[float]] = {arm: [] for arm in arms}
+    block_real: dict[str, list[float]] = {arm: [] for arm in vec}
+    seeds = iter(range(1 << 30))
+
+    def native_loop() -> None:
+        a2perf_rs.bench(DOG, steps=per, seed=next(seeds))
+
     for b in range(blocks):
-        block = {}
-        for arm in arms[b % 3:] + arms[: b % 3]:  # rotate the order
-            n = 2 if arm == "vec2" else 1
+        for arm in arms[b % len(arms):] + arms[: b % len(arms)]:
+            n = width[arm]
             actions = rng.uniform(low, high, (per, n, 12)).astype(np.float32)
             if zero:
                 actions[:] = 0.0
@@ -115,31 +139,62 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
                     _, _, term, trunc, _ = single.step(a[0])
                     if term or trunc:
                         single.reset()
-            else:
-                v = vec[n]
+            elif arm in vec:
+                v, done = vec[arm], ended[arm]
+                real = 0
                 for a in actions:
-                    v.step(a)
-            block[arm] = time.perf_counter() - t
-            seconds[arm] += block[arm]
-        block_ratios.append(2 * block["vec1"] / block["vec2"])
-    rate = {arm: blocks * per * (2 if arm == "vec2" else 1) / sec for arm, sec in seconds.items()}
+                    # Next-step mode: an env whose episode ended last step only resets now.
+                    real += n if arm == "vec2_same_step" else int((~done).sum())
+                    _, _, term, trunc, _ = v.step(a)
+                    done[:] = term | trunc
+                transitions[arm] += real
+                block_real[arm].append(real / (time.perf_counter() - t))
+            elif arm == "free1":
+                native_loop()
+            else:
+                threads = [threading.Thread(target=native_loop) for _ in range(2)]
+                for th in threads:
+                    th.start()
+                for th in threads:
+                    th.join()
+            dt = time.perf_counter() - t
+            seconds[arm] += dt
+            block_rates[arm].append(per * n / dt)
     for v in vec.values():
         v.close()
+    rate = {arm: blocks * per * width[arm] / sec for arm, sec in seconds.items()}
+    real = {arm: transitions[arm] / seconds[arm] for arm in vec}
+
+    def ratio(a: str, b: str, transitions_of_a: bool = False) -> dict:
+        """`a`'s steps (or transitions) per second over `b`'s: over the whole run, and the
+        median of the per-block ratios (robust to the host taking a vCPU away for a few
+        blocks, which stalls two threads while one runs on)."""
+        top, tops = (real[a], block_real[a]) if transitions_of_a else (rate[a], block_rates[a])
+        per_block = np.array(tops) / np.array(block_rates[b])
+        return {"whole_run": top / rate[b], "median_block": float(np.median(per_block))}
+
     return {
         "steps_per_s": rate,
-        "speedup_over_make_vec_1": rate["vec2"] / rate["vec1"],
-        "speedup_over_gym_make": rate["vec2"] / rate["single"],
-        # Robust to the host taking a vCPU away for a few blocks (which stalls lockstep N = 2
-        # while N = 1 runs on): the ratio of the typical block.
-        "speedup_over_make_vec_1_median_block": float(np.median(block_ratios)),
-        "block_ratio_quartiles": [float(q) for q in np.percentile(block_ratios, [25, 75])],
+        "transitions_per_s": real,
+        "speedup_over_gym_make": ratio("vec2", "single"),
+        "transition_speedup_over_gym_make_same_step": ratio("vec2_same_step", "single", True),
+        "transition_speedup_over_gym_make_next_step": ratio("vec2", "single", True),
+        "speedup_over_make_vec_1": ratio("vec2", "vec1"),
+        "machine_two_thread_scaling": ratio("free2", "free1"),
+        "block_ratio_quartiles_over_gym_make": [
+            float(q)
+            for q in np.percentile(np.array(block_rates["vec2"]) / np.array(block_rates["single"]), [25, 75])
+        ],
     }
 
 
 def lockstep_ceiling(steps: int, zero: bool = False) -> float:
-    """The best speed-up any lockstep N = 2 vector env can reach on two ideal cores: two
-    environments stepped one after the other, each step timed, sum of both times over the slower
-    one's (next-step autoreset: a reset-only step is paired with a full step of the other env)."""
+    """The best speed-up a lockstep N = 2 vector env could reach if two cores ran as fast as one:
+    two environments stepped one after the other on this thread, each step timed, sum of both
+    times over the slower one's (next-step autoreset: a reset-only step is paired with a full
+    step of the other env). The spread of step times it pairs is mostly the host's, not the
+    physics': replaying the same actions twice, per-step times correlate by only 0.1–0.2, while
+    the mean step time differs by under 20% between contact states."""
     envs = [A2PerfEnv(DOG) for _ in range(2)]
     rng = np.random.default_rng(1)
     low, high = envs[0].action_space.low, envs[0].action_space.high
@@ -162,22 +217,6 @@ def lockstep_ceiling(steps: int, zero: bool = False) -> float:
         total += t[0] + t[1]
         slowest += max(t)
     return total / slowest
-
-
-def machine_ceiling(binary: str, steps: int, rounds: int) -> float:
-    """What two cores give this workload with no lockstep at all: two `a2perf bench` processes
-    at once (summed env steps/s) over one alone, alternated `rounds` times. Below 2 where one
-    busy core runs faster than two (turbo, a shared host)."""
-    alone = pair = 0.0
-    for _ in range(rounds):
-        alone += native_bench(binary, DOG, steps)["steps_per_second"]
-        procs = [
-            subprocess.Popen([binary, "bench", DOG, "--steps", str(steps), "--json"],
-                             stdout=subprocess.PIPE, text=True)
-            for _ in range(2)
-        ]
-        pair += sum(json.loads(p.communicate()[0])["steps_per_second"] for p in procs)
-    return pair / alone
 
 
 def placement_cost_ms(shared: Path, calls: int) -> dict:
@@ -239,7 +278,6 @@ def main() -> None:
     for kind, zero in (("", False), ("_zero", True)):
         res[f"make_vec_2{kind}_speedup"] = vector_speedup(int(60 * k) or 6, 100, zero)
         res[f"lockstep_ceiling{kind}"] = lockstep_ceiling(int(3000 * k), zero)
-    res["machine_ceiling_two_processes"] = machine_ceiling(args.a2perf, int(1500 * k), 6)
     if Path(args.shared, "circuit", "ariane133_ng45").exists():
         res.update(placement_cost_ms(Path(args.shared), int(200 * k) or 20))
     res["load_average_after"] = os.getloadavg()

@@ -65,6 +65,8 @@ struct Buffers {
 
 struct State {
     slots: Vec<Slot>,
+    /// The threads beside the caller's; `None` for one environment or one core.
+    workers: Option<Crew>,
     actions: Vec<Action>,
     bufs: Buffers,
     closed: bool,
@@ -80,8 +82,6 @@ pub struct PyVecEnv {
     params: std::collections::BTreeMap<String, a2perf_core::Value>,
     autoreset: Autoreset,
     copy: bool,
-    /// The threads beside the caller's that step the environments (`None`: one environment).
-    workers: Option<Crew>,
 }
 
 fn write_obs(layout: &ObsLayout, obs: &Observation, out: &mut SlotOut<'_>) -> PyResult<()> {
@@ -199,6 +199,11 @@ impl PyVecEnv {
         work: impl Fn(usize, &mut Slot, &Action) -> PyResult<()> + Sync,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let n = st.slots.len();
+        // A vector env inherited through fork(): its worker threads stayed in the parent, so
+        // start this process's own (the crew alone would run every part on this thread).
+        if st.workers.as_ref().is_some_and(Crew::forked) {
+            st.workers = worker_crew(n)?;
+        }
         let obs_bufs: Vec<Bound<'py, PyArrayDyn<f32>>> =
             st.bufs.obs.iter().map(|b| b.bind(py).clone()).collect();
         let rewards = st.bufs.rewards.bind(py).clone();
@@ -249,7 +254,7 @@ impl PyVecEnv {
                 work(i, slot, &actions[i])?;
                 write_slot(layout, slot, out)
             };
-            py.detach(|| match &self.workers {
+            py.detach(|| match &st.workers {
                 // No thread hand-off for a single environment.
                 None => run_chunk(0, &mut st.slots, &mut outs, &one),
                 Some(pool) => run_pinned(pool, &mut st.slots, &mut outs, &one),
@@ -516,6 +521,7 @@ impl PyVecEnv {
                 actions,
                 bufs,
                 closed: false,
+                workers: worker_crew(num_envs)?,
             }),
             layout,
             action,
@@ -523,7 +529,6 @@ impl PyVecEnv {
             params,
             autoreset,
             copy,
-            workers: worker_crew(num_envs)?,
         })
     }
 

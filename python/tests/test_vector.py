@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import select
+import signal
+import time
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -128,3 +133,52 @@ def test_seeds_per_environment_and_bad_vector_input() -> None:
     venv.close()
     with pytest.raises(RuntimeError, match="closed"):
         venv.reset(seed=0)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="os.fork is POSIX-only")
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # fork() of a multi-threaded process
+def test_a_forked_child_steps_the_inherited_vector_env_like_the_parent() -> None:
+    # The worker threads stay in the parent; the child's steps must neither hang waiting for
+    # them nor differ from the parent's.
+    venv = gym.make_vec(
+        "a2perf/QuadrupedLocomotion-DogPace-v0", num_envs=2,
+        vectorization_mode="vector_entry_point", episode_steps=15,
+    )
+    venv.reset(seed=3)
+    actions = np.random.default_rng(5).uniform(-0.4, 0.4, (30, 2, 12)).astype(np.float32)
+    venv.step(actions[0])  # the workers have run before the fork
+
+    def run() -> bytes:
+        out = [venv.step(a) for a in actions[1:]]
+        return b"".join(np.concatenate([o.ravel(), r, te, tr]).tobytes() for o, r, te, tr, _ in out)
+
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: report its trajectory, then leave without pytest's teardown
+        try:
+            data = run()
+            os.write(write, len(data).to_bytes(8, "little"))
+            view = memoryview(data)
+            while view:
+                view = view[os.write(write, view):]
+        finally:
+            os._exit(0)
+    os.close(write)
+    expected = run()
+    received = b""
+    deadline = time.monotonic() + 60
+    while True:
+        ready, _, _ = select.select([read], [], [], max(0.0, deadline - time.monotonic()))
+        if not ready:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            pytest.fail("the forked child hung stepping the inherited vector env")
+        chunk = os.read(read, 1 << 16)
+        if not chunk:
+            break
+        received += chunk
+    os.close(read)
+    os.waitpid(pid, 0)
+    assert int.from_bytes(received[:8], "little") == len(expected)
+    assert received[8:] == expected
+    venv.close()
