@@ -102,7 +102,8 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
       transition (the reset happens inside the step that ended the episode);
     - `free1`, `free2`: the native loop of `a2perf bench` (`a2perf_rs.bench`, GIL released) on
       one thread, and on two threads at once: what this machine gives two independent threads
-      of this workload at that moment — the ceiling of any N = 2 vector env.
+      of this workload at that moment — the ceiling of any N = 2 vector env (random actions
+      only: the native loop has no zero-action mode, so `zero` runs leave these arms out).
 
     With random actions DogPace episodes last ~10 steps, so in next-step mode about one step in
     ten of each env is an autoreset step (no transition): `transitions_per_s` leaves them out."""
@@ -115,7 +116,8 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
     for v in vec.values():
         v.reset(seed=0)
     single.reset(seed=0)
-    arms = ["single", *vec, "free1", "free2"]
+    # The native loop steps with random actions: a free-thread arm only for that workload.
+    arms = ["single", *vec, *([] if zero else ["free1", "free2"])]
     width = {arm: 2 if arm.endswith(("2", "same_step")) else 1 for arm in arms}
     seconds = dict.fromkeys(arms, 0.0)
     transitions = dict.fromkeys(vec, 0)
@@ -180,7 +182,7 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
         "transition_speedup_over_gym_make_same_step": ratio("vec2_same_step", "single", True),
         "transition_speedup_over_gym_make_next_step": ratio("vec2", "single", True),
         "speedup_over_make_vec_1": ratio("vec2", "vec1"),
-        "machine_two_thread_scaling": ratio("free2", "free1"),
+        **({} if zero else {"machine_two_thread_scaling": ratio("free2", "free1")}),
         "block_ratio_quartiles_over_gym_make": [
             float(q)
             for q in np.percentile(np.array(block_rates["vec2"]) / np.array(block_rates["single"]), [25, 75])
