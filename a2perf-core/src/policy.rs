@@ -144,20 +144,36 @@ fn fnv1a64(parts: &[&[u8]]) -> u64 {
 /// The checkpoint container around a payload given in parts (concatenated), so that large
 /// payloads are copied once.
 pub(crate) fn encode_container(algorithm: &str, format_version: u32, parts: &[&[u8]]) -> Vec<u8> {
+    let len: usize = parts.iter().map(|p| p.len()).sum();
+    let mut out = Vec::with_capacity(40 + algorithm.len() + len);
+    write_container(&mut out, algorithm, format_version, parts)
+        .unwrap_or_else(|_| unreachable!("writing to a Vec cannot fail"));
+    out
+}
+
+/// Writes the container of `parts` (their concatenation is the payload) to `w` without
+/// gathering the payload in one buffer; returns the bytes written.
+pub(crate) fn write_container(
+    w: &mut impl std::io::Write,
+    algorithm: &str,
+    format_version: u32,
+    parts: &[&[u8]],
+) -> std::io::Result<u64> {
     let name = algorithm.as_bytes();
     let len: usize = parts.iter().map(|p| p.len()).sum();
-    let mut out = Vec::with_capacity(40 + name.len() + len);
-    out.extend_from_slice(CHECKPOINT_MAGIC);
-    out.extend_from_slice(&CONTAINER_VERSION.to_le_bytes());
-    out.extend_from_slice(&(name.len() as u32).to_le_bytes());
-    out.extend_from_slice(name);
-    out.extend_from_slice(&format_version.to_le_bytes());
-    out.extend_from_slice(&(len as u64).to_le_bytes());
-    out.extend_from_slice(&fnv1a64(parts).to_le_bytes());
+    let mut head = Vec::with_capacity(40 + name.len());
+    head.extend_from_slice(CHECKPOINT_MAGIC);
+    head.extend_from_slice(&CONTAINER_VERSION.to_le_bytes());
+    head.extend_from_slice(&(name.len() as u32).to_le_bytes());
+    head.extend_from_slice(name);
+    head.extend_from_slice(&format_version.to_le_bytes());
+    head.extend_from_slice(&(len as u64).to_le_bytes());
+    head.extend_from_slice(&fnv1a64(parts).to_le_bytes());
+    w.write_all(&head)?;
     for p in parts {
-        out.extend_from_slice(p);
+        w.write_all(p)?;
     }
-    out
+    Ok((head.len() + len) as u64)
 }
 
 impl Checkpoint {

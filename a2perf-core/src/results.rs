@@ -43,6 +43,15 @@ pub enum ResultsError {
 /// # std::fs::remove_dir_all(&dir).unwrap();
 /// ```
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_atomic_with(path, |f| f.write_all(bytes))
+}
+
+/// [`write_atomic`] for content written piece by piece: `write` fills the temporary file, which
+/// then replaces `path` (so a large file need not be gathered in memory first).
+pub(crate) fn write_atomic_with<T>(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<T>,
+) -> std::io::Result<T> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -55,14 +64,19 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         name.to_string_lossy(),
         std::process::id()
     ));
-    {
+    let written = (|| -> std::io::Result<T> {
         let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
+        let out = write(&mut f)?;
         f.sync_all()?;
-    }
+        Ok(out)
+    })()
+    .inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })?;
     std::fs::rename(&tmp, path).inspect_err(|_| {
         let _ = std::fs::remove_file(&tmp);
-    })
+    })?;
+    Ok(written)
 }
 
 /// Serialises `value` as pretty JSON and writes it atomically.
@@ -189,6 +203,26 @@ impl RunDir {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_failed_piecewise_write_keeps_the_old_file_and_leaves_no_temporary() {
+        let tmp = tempfile::tempdir().unwrap();
+        let p = tmp.path().join("state.bin");
+        write_atomic(&p, b"old").unwrap();
+        let err = write_atomic_with(&p, |f| {
+            f.write_all(b"half of the new")?;
+            Err::<(), _>(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert_eq!(err.to_string(), "disk full");
+        assert_eq!(std::fs::read(&p).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 1);
+        assert_eq!(
+            write_atomic_with(&p, |f| f.write_all(b"new").map(|()| 3)).unwrap(),
+            3
+        );
+        assert_eq!(std::fs::read(&p).unwrap(), b"new");
+    }
 
     #[test]
     fn run_dir_records_completion() {

@@ -84,6 +84,15 @@ pub struct ResumePoint {
 impl ResumePoint {
     /// Encodes the resume point in its checksummed container.
     pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(128 + self.state.len());
+        self.write_to(&mut out)
+            .unwrap_or_else(|_| unreachable!("writing to a Vec cannot fail"));
+        out
+    }
+
+    /// Writes [`Self::to_bytes`]'s encoding to `w` without gathering it in memory (the state
+    /// can be hundreds of MB: a replay buffer); returns the bytes written.
+    pub fn write_to(&self, w: &mut impl std::io::Write) -> std::io::Result<u64> {
         let p = &self.progress;
         let mut head = Vec::with_capacity(64 + 32 * p.curve.points.len());
         head.extend_from_slice(RESUME_MAGIC);
@@ -102,7 +111,8 @@ impl ResumePoint {
             }
         }
         head.extend_from_slice(&(self.state.len() as u64).to_le_bytes());
-        crate::policy::encode_container(
+        crate::policy::write_container(
+            w,
             CONTAINER_NAME,
             RESUME_FORMAT_VERSION,
             &[&head, &self.state],
@@ -246,14 +256,18 @@ impl ResumeDir {
     /// Returns the size of the file written.
     pub fn save(&self, point: &ResumePoint) -> std::io::Result<u64> {
         std::fs::create_dir_all(&self.dir)?;
-        let bytes = point.to_bytes();
-        crate::results::write_atomic(&self.path_for(point.progress.env_steps), &bytes)?;
+        // Written to the file piece by piece (three writes): the encoding is not gathered in
+        // memory beside the state.
+        let written =
+            crate::results::write_atomic_with(&self.path_for(point.progress.env_steps), |f| {
+                point.write_to(f)
+            })?;
         let all = self.list()?;
         let excess = all.len().saturating_sub(RESUME_POINTS_KEPT);
         for (_, old) in &all[..excess] {
             std::fs::remove_file(old)?;
         }
-        Ok(bytes.len() as u64)
+        Ok(written)
     }
 
     /// The resume points on disk, oldest first.
@@ -387,6 +401,28 @@ mod tests {
         for n in 0..bytes.len() {
             assert!(ResumePoint::from_bytes(&bytes[..n]).is_err(), "cut at {n}");
         }
+    }
+
+    #[test]
+    fn a_saved_point_is_its_encoding_written_piece_by_piece() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = ResumeDir::new(tmp.path().join("resume"));
+        // A state larger than any write buffer, with a pattern that catches misplaced pieces.
+        let p = point(7, (0..3_000_000u32).map(|i| (i % 251) as u8).collect());
+        let written = dir.save(&p).unwrap();
+        let on_disk = std::fs::read(dir.path_for(7)).unwrap();
+        assert_eq!(written, on_disk.len() as u64);
+        assert!(on_disk == p.to_bytes(), "the file differs from to_bytes()");
+        assert_eq!(ResumePoint::from_bytes(&on_disk).unwrap(), p);
+        // No temporary file is left beside it.
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(
+            names,
+            [std::ffi::OsString::from("step_000000000007.resume")]
+        );
     }
 
     #[test]
