@@ -12,6 +12,7 @@ recorded: on a shared machine the figures are only comparable within one run.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import subprocess
@@ -101,9 +102,12 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
     - `vec2_same_step`: make_vec N = 2 with same-step autoreset, where every step is a
       transition (the reset happens inside the step that ended the episode);
     - `free1`, `free2`: the native loop of `a2perf bench` (`a2perf_rs.bench`, GIL released) on
-      one thread, and on two threads at once: what this machine gives two independent threads
-      of this workload at that moment — the ceiling of any N = 2 vector env (random actions
-      only: the native loop has no zero-action mode, so `zero` runs leave these arms out).
+      one thread, and on two threads at once, timed by the loop itself (building its env is
+      not counted): what this machine gives two independent threads of this workload at that
+      moment (their summed steps/s: `machine_two_thread_scaling`), and what a lockstep pair of
+      them could get (twice the slower thread's steps/s: `machine_two_thread_lockstep_bound`; the
+      two vCPUs of a shared host often run at different speeds). Random actions only: the native
+      loop has no zero-action mode, so `zero` runs leave these arms out.
 
     With random actions DogPace episodes last ~10 steps, so in next-step mode about one step in
     ten of each env is an autoreset step (no transition): `transitions_per_s` leaves them out."""
@@ -118,16 +122,20 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
     single.reset(seed=0)
     # The native loop steps with random actions: a free-thread arm only for that workload.
     arms = ["single", *vec, *([] if zero else ["free1", "free2"])]
-    width = {arm: 2 if arm.endswith(("2", "same_step")) else 1 for arm in arms}
-    seconds = dict.fromkeys(arms, 0.0)
+    width = {"single": 1, "vec1": 1, "vec2": 2, "vec2_same_step": 2, "free1": 1, "free2": 2,
+             "free2_slower": 2}
+    # Not an arm: the slower of free2's two threads, recorded with it.
+    measured = [*arms, *([] if zero else ["free2_slower"])]
+    seconds = dict.fromkeys(measured, 0.0)
     transitions = dict.fromkeys(vec, 0)
     ended = {arm: np.zeros(width[arm], bool) for arm in vec}
-    block_rates: dict[str, list[float]] = {arm: [] for arm in arms}
+    block_rates: dict[str, list[float]] = {arm: [] for arm in measured}
     block_real: dict[str, list[float]] = {arm: [] for arm in vec}
-    seeds = iter(range(1 << 30))
+    seeds = itertools.count()
 
-    def native_loop() -> None:
-        a2perf_rs.bench(DOG, steps=per, seed=next(seeds))
+    def native_rate() -> float:
+        """Steps/s of the native loop alone (building its env is not timed)."""
+        return a2perf_rs.bench(DOG, steps=per, seed=next(seeds))["steps_per_second"]
 
     for b in range(blocks):
         for arm in arms[b % len(arms):] + arms[: b % len(arms)]:
@@ -141,6 +149,7 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
                     _, _, term, trunc, _ = single.step(a[0])
                     if term or trunc:
                         single.reset()
+                dt = time.perf_counter() - t
             elif arm in vec:
                 v, done = vec[arm], ended[arm]
                 real = 0
@@ -149,17 +158,21 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
                     real += n if arm == "vec2_same_step" else int((~done).sum())
                     _, _, term, trunc, _ = v.step(a)
                     done[:] = term | trunc
+                dt = time.perf_counter() - t
                 transitions[arm] += real
-                block_real[arm].append(real / (time.perf_counter() - t))
-            elif arm == "free1":
-                native_loop()
+                block_real[arm].append(real / dt)
             else:
-                threads = [threading.Thread(target=native_loop) for _ in range(2)]
+                # Free threads: the loops' own timing, summed over the threads that ran at once.
+                rates: list[float] = []
+                threads = [threading.Thread(target=lambda: rates.append(native_rate())) for _ in range(n)]
                 for th in threads:
                     th.start()
                 for th in threads:
                     th.join()
-            dt = time.perf_counter() - t
+                dt = per * n / sum(rates)
+                if n == 2:  # what lockstep could get from these two threads: the slower one, twice
+                    seconds["free2_slower"] += per / min(rates)
+                    block_rates["free2_slower"].append(2 * min(rates))
             seconds[arm] += dt
             block_rates[arm].append(per * n / dt)
     for v in vec.values():
@@ -182,7 +195,10 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
         "transition_speedup_over_gym_make_same_step": ratio("vec2_same_step", "single", True),
         "transition_speedup_over_gym_make_next_step": ratio("vec2", "single", True),
         "speedup_over_make_vec_1": ratio("vec2", "vec1"),
-        **({} if zero else {"machine_two_thread_scaling": ratio("free2", "free1")}),
+        **({} if zero else {
+            "machine_two_thread_scaling": ratio("free2", "free1"),
+            "machine_two_thread_lockstep_bound": ratio("free2_slower", "free1"),
+        }),
         "block_ratio_quartiles_over_gym_make": [
             float(q)
             for q in np.percentile(np.array(block_rates["vec2"]) / np.array(block_rates["single"]), [25, 75])
