@@ -63,6 +63,13 @@ pub struct BenchReport {
     pub mean_step_us: f64,
     /// Every parameter of the environment in force.
     pub params: BTreeMap<String, Value>,
+    /// The timed loop unit by unit, µs, in order: a step (sampling its action included) or the
+    /// reset that followed the end of an episode, each its own unit, as a vector env with
+    /// next-step autoreset spends them (the reset in the call after the episode's last step).
+    /// Pairing two loops' timelines unit by unit bounds what a lockstep pair of them could do.
+    /// Not serialised: `a2perf bench --json` stays one short object.
+    #[serde(skip)]
+    pub timeline_us: Vec<f64>,
 }
 
 /// Why a benchmark could not run.
@@ -93,6 +100,8 @@ pub enum BenchError {
 /// let r = bench_env(&reg, "WebNavigation-Difficulty-01-v0", &Default::default(), 50, 0).unwrap();
 /// assert_eq!(r.steps, 50);
 /// assert!(r.step_latency_us.p50 > 0.0 && r.steps_per_second > 0.0);
+/// // One unit per step and per reset after the first.
+/// assert_eq!(r.timeline_us.len() as u64, r.steps + r.episodes - 1);
 /// ```
 pub fn bench_env(
     registry: &Registry,
@@ -115,6 +124,7 @@ pub fn bench_env(
     let seeds = RngStream::new(seed, "bench/episodes");
     let mut step = Step::default();
     let mut reset_us = Vec::new();
+    let mut timeline_us = Vec::with_capacity(usize::try_from(steps).unwrap_or(0) * 11 / 10);
     let mut step_us = Vec::with_capacity(usize::try_from(steps).unwrap_or(0));
     let mut episodes = 0u64;
     let mut episode_len = 0usize;
@@ -127,14 +137,16 @@ pub fn bench_env(
             &mut step.observation,
         )
         .map_err(env_err)?;
-        reset_us.push(t.elapsed().as_secs_f64() * 1e6);
+        let us = t.elapsed().as_secs_f64() * 1e6;
+        reset_us.push(us);
         *episodes += 1;
-        Ok::<(), BenchError>(())
+        Ok::<f64, BenchError>(us)
     };
     reset(&mut env, &mut step, &mut episodes)?;
     let total = Instant::now();
     let mut stepping = 0.0;
     for _ in 0..steps {
+        let unit = Instant::now();
         let action = match spec
             .action_space
             .sample(&mut rng, step.observation.action_mask.as_deref())
@@ -142,7 +154,7 @@ pub fn bench_env(
             Some(a) => a,
             None => {
                 // No legal action left: the episode cannot continue.
-                reset(&mut env, &mut step, &mut episodes)?;
+                timeline_us.push(reset(&mut env, &mut step, &mut episodes)?);
                 episode_len = 0;
                 continue;
             }
@@ -152,9 +164,10 @@ pub fn bench_env(
         let dt = t.elapsed().as_secs_f64();
         stepping += dt;
         step_us.push(dt * 1e6);
+        timeline_us.push(unit.elapsed().as_secs_f64() * 1e6);
         episode_len += 1;
         if step.done() || episode_len >= limit {
-            reset(&mut env, &mut step, &mut episodes)?;
+            timeline_us.push(reset(&mut env, &mut step, &mut episodes)?);
             episode_len = 0;
         }
     }
@@ -170,5 +183,33 @@ pub fn bench_env(
         reset_time_us: Percentiles::of(&mut reset_us),
         step_latency_us: Percentiles::of(&mut step_us),
         params: resolved.values().clone(),
+        timeline_us,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_timeline_holds_every_step_and_every_reset_in_order_within_the_wall_time() {
+        let reg = crate::registry::full_registry();
+        let id = "QuadrupedLocomotion-DogPace-v0";
+        let r = bench_env(&reg, id, &BTreeMap::new(), 200, 3).unwrap();
+        // Random actions topple the robot within a few dozen steps: resets are in the timeline.
+        assert!(r.episodes > 2, "{} episodes", r.episodes);
+        assert_eq!(r.timeline_us.len() as u64, r.steps + r.episodes - 1);
+        assert!(r.timeline_us.iter().all(|&us| us > 0.0));
+        let units: f64 = r.timeline_us.iter().sum();
+        let wall_us = r.steps as f64 / r.steps_per_second * 1e6;
+        // The units are timed inside the loop, which the wall time encloses; each step unit
+        // holds that step's `step_into`.
+        assert!(units <= wall_us, "{units} > {wall_us}");
+        assert!(units >= r.mean_step_us * r.steps as f64, "{units}");
+        let json = serde_json::to_value(&r).unwrap();
+        assert!(
+            json.get("timeline_us").is_none(),
+            "the CLI's JSON stays short"
+        );
+    }
 }

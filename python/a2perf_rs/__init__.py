@@ -45,15 +45,19 @@ __all__ = [
 ]
 
 
-def bench(env_id: str, steps: int = 10_000, seed: int = 0, **params: Any) -> dict[str, Any]:
+def bench(
+    env_id: str, steps: int = 10_000, seed: int = 0, *, timeline: bool = False, **params: Any
+) -> dict[str, Any]:
     """``a2perf bench`` in this process: steps ``env_id`` (with or without the ``a2perf/``
     namespace) ``steps`` times with uniformly random legal actions, timing every native
     ``step``; returns the report ``a2perf bench --json`` prints (``steps_per_second``,
     ``step_latency_us`` p50/p90/p99, ``mean_step_us``, ``reset_time_us``, ``params``). The GIL is
     released meanwhile. Timing the native step in the same process as a Python loop makes the
-    two comparable on a machine whose speed drifts."""
+    two comparable on a machine whose speed drifts. ``timeline=True`` adds ``timeline_us``: the
+    loop unit by unit in µs, each step (its action's sampling included) and each reset after an
+    episode's end its own unit, the way a vector env with next-step autoreset spends them."""
     bare = env_id.split("/", 1)[1] if env_id.startswith("a2perf/") else env_id
-    return json.loads(_native.bench(bare, steps, seed, params))
+    return json.loads(_native.bench(bare, steps, seed, params, timeline))
 
 
 def chromium_unavailable_reason() -> str | None:

@@ -106,8 +106,19 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
       not counted): what this machine gives two independent threads of this workload at that
       moment (their summed steps/s: `machine_two_thread_scaling`), and what a lockstep pair of
       them could get (twice the slower thread's steps/s: `machine_two_thread_lockstep_bound`; the
-      two vCPUs of a shared host often run at different speeds). Random actions only: the native
-      loop has no zero-action mode, so `zero` runs leave these arms out.
+      two vCPUs of a shared host often run at different speeds). The same two loops' timelines
+      paired unit by unit (`free2_paired`: unit i of both threads, a step or the reset after an
+      episode's end, as next-step autoreset spends them, costs the slower of the two) give what
+      any lockstep N = 2 env with one env per thread could reach with those step times:
+      `machine_lockstep_bound_paired`, and `make_vec_2_of_paired_bound` is the share of it
+      that make_vec N = 2 delivers;
+    - `cpu0`, `cpu1`: the native loop alone on one thread pinned to CPU 0, then CPU 1 (when the
+      machine has both): `vcpu_speed_ratio` is the slower CPU's steps/s over the faster one's.
+      On two real cores it is ~1; where it is not, the single env's figure depends on the CPU it
+      happens to run on, and a lockstep pair runs at the slower one's pace.
+
+    Random actions only for the native arms: the native loop has no zero-action mode, so `zero`
+    runs leave them out.
 
     With random actions DogPace episodes last ~10 steps, so in next-step mode about one step in
     ten of each env is an autoreset step (no transition): `transitions_per_s` leaves them out."""
@@ -121,11 +132,13 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
         v.reset(seed=0)
     single.reset(seed=0)
     # The native loop steps with random actions: a free-thread arm only for that workload.
-    arms = ["single", *vec, *([] if zero else ["free1", "free2"])]
+    cpus = [c for c in (0, 1) if c in os.sched_getaffinity(0)] if hasattr(os, "sched_getaffinity") else []
+    pinned = [f"cpu{c}" for c in cpus] if len(cpus) == 2 and not zero else []
+    arms = ["single", *vec, *([] if zero else ["free1", "free2"]), *pinned]
     width = {"single": 1, "vec1": 1, "vec2": 2, "vec2_same_step": 2, "free1": 1, "free2": 2,
-             "free2_slower": 2}
-    # Not an arm: the slower of free2's two threads, recorded with it.
-    measured = [*arms, *([] if zero else ["free2_slower"])]
+             "free2_slower": 2, "free2_paired": 2, "cpu0": 1, "cpu1": 1}
+    # Not arms: free2's two threads as lockstep bounds, recorded with it.
+    measured = [*arms, *([] if zero else ["free2_slower", "free2_paired"])]
     seconds = dict.fromkeys(measured, 0.0)
     transitions = dict.fromkeys(vec, 0)
     ended = {arm: np.zeros(width[arm], bool) for arm in vec}
@@ -133,9 +146,9 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
     block_real: dict[str, list[float]] = {arm: [] for arm in vec}
     seeds = itertools.count()
 
-    def native_rate() -> float:
-        """Steps/s of the native loop alone (building its env is not timed)."""
-        return a2perf_rs.bench(DOG, steps=per, seed=next(seeds))["steps_per_second"]
+    def native_run() -> dict:
+        """The native loop alone (building its env is not timed), with its timeline."""
+        return a2perf_rs.bench(DOG, steps=per, seed=next(seeds), timeline=True)
 
     for b in range(blocks):
         for arm in arms[b % len(arms):] + arms[: b % len(arms)]:
@@ -161,18 +174,37 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
                 dt = time.perf_counter() - t
                 transitions[arm] += real
                 block_real[arm].append(real / dt)
+            elif arm in pinned:
+                # One thread pinned to one CPU (affinity of that thread only), the loop's own timing.
+                rates_pinned: list[float] = []
+
+                def on_cpu(cpu: int = int(arm[3:])) -> None:
+                    os.sched_setaffinity(0, {cpu})
+                    rates_pinned.append(native_run()["steps_per_second"])
+
+                th = threading.Thread(target=on_cpu)
+                th.start()
+                th.join()
+                dt = per / rates_pinned[0]
             else:
                 # Free threads: the loops' own timing, summed over the threads that ran at once.
-                rates: list[float] = []
-                threads = [threading.Thread(target=lambda: rates.append(native_rate())) for _ in range(n)]
+                runs: list[dict] = []
+                threads = [threading.Thread(target=lambda: runs.append(native_run())) for _ in range(n)]
                 for th in threads:
                     th.start()
                 for th in threads:
                     th.join()
+                rates = [r["steps_per_second"] for r in runs]
                 dt = per * n / sum(rates)
                 if n == 2:  # what lockstep could get from these two threads: the slower one, twice
                     seconds["free2_slower"] += per / min(rates)
                     block_rates["free2_slower"].append(2 * min(rates))
+                    # ... and unit by unit: each pair of units costs the slower one.
+                    units = min(len(r["timeline_us"]) for r in runs)
+                    paired = np.maximum(*(np.array(r["timeline_us"][:units]) for r in runs))
+                    call_s = float(paired.sum()) / 1e6 / units
+                    seconds["free2_paired"] += per * call_s
+                    block_rates["free2_paired"].append(2 / call_s)
             seconds[arm] += dt
             block_rates[arm].append(per * n / dt)
     for v in vec.values():
@@ -198,6 +230,16 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
         **({} if zero else {
             "machine_two_thread_scaling": ratio("free2", "free1"),
             "machine_two_thread_lockstep_bound": ratio("free2_slower", "free1"),
+            "machine_lockstep_bound_paired": ratio("free2_paired", "free1"),
+            "make_vec_2_of_paired_bound": ratio("vec2", "free2_paired"),
+        }),
+        **({} if not pinned else {
+            "vcpu_speed_ratio": {
+                "whole_run": min(rate["cpu0"], rate["cpu1"]) / max(rate["cpu0"], rate["cpu1"]),
+                "median_block": float(np.median(
+                    np.minimum(block_rates["cpu0"], block_rates["cpu1"])
+                    / np.maximum(block_rates["cpu0"], block_rates["cpu1"]))),
+            },
         }),
         "block_ratio_quartiles_over_gym_make": [
             float(q)

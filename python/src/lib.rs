@@ -50,15 +50,17 @@ fn env_entries(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
     Ok(out)
 }
 
-/// `a2perf bench` in this process: the report as JSON (`a2perf_rs.bench` parses it).
+/// `a2perf bench` in this process: the report as JSON (`a2perf_rs.bench` parses it), with the
+/// loop's unit-by-unit timeline (`timeline_us`) when `timeline` is true.
 #[pyfunction(name = "bench")]
-#[pyo3(signature = (env_id, steps, seed, params=None))]
+#[pyo3(signature = (env_id, steps, seed, params=None, timeline=false))]
 fn bench_env(
     py: Python<'_>,
     env_id: &str,
     steps: u64,
     seed: u64,
     params: Option<&Bound<'_, PyDict>>,
+    timeline: bool,
 ) -> PyResult<String> {
     let reg = env::registry();
     let values = env::env_kwargs(params)?;
@@ -78,7 +80,11 @@ fn bench_env(
             )
         })
     })?;
-    serde_json::to_string(&report)
+    let mut json = serde_json::to_value(&report);
+    if let (Ok(serde_json::Value::Object(fields)), true) = (&mut json, timeline) {
+        fields.insert("timeline_us".into(), report.timeline_us.into());
+    }
+    json.and_then(|j| serde_json::to_string(&j))
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
 }
 

@@ -237,8 +237,11 @@ def test_bench_runs_the_native_benchmark_in_this_process() -> None:
     assert 0 < report["step_latency_us"]["p50"] <= report["step_latency_us"]["p99"]
     assert report["steps_per_second"] > 0 and report["params"]["num_websites"] >= 1
     # Same seed, same trajectory: the same episodes.
-    again = a2perf_rs.bench("WebNavigation-Difficulty-01-v0", steps=300, seed=4)
-    assert again["episodes"] == report["episodes"]
+    again = a2perf_rs.bench("WebNavigation-Difficulty-01-v0", steps=300, seed=4, timeline=True)
+    assert again["episodes"] == report["episodes"] and "timeline_us" not in report
+    # One unit per step and per reset after the first, in order.
+    assert len(again["timeline_us"]) == 300 + again["episodes"] - 1
+    assert min(again["timeline_us"]) > 0
     with pytest.raises(ValueError, match="did you mean"):
         a2perf_rs.bench("WebNavigation-Difficulty-1-v0", steps=10)
     with pytest.raises(TypeError, match="num_website"):
