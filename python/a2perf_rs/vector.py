@@ -104,6 +104,8 @@ class A2PerfVectorEnv(VectorEnv):
         self.params: dict[str, Any] = spec["params"]
         self.provenance: dict[str, str] = spec["metadata"]
         self._discrete = isinstance(self.single_action_space, gym.spaces.Discrete)
+        self._action_dtype = np.dtype(np.int64 if self._discrete else np.float32)
+        self._action_shape = (self.num_envs, *self.single_action_space.shape)
 
     def reset(
         self,
@@ -135,6 +137,15 @@ class A2PerfVectorEnv(VectorEnv):
         self, actions: Any
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Steps environment ``i`` with ``actions[i]``."""
+        if (
+            actions.__class__ is np.ndarray
+            and actions.dtype == self._action_dtype
+            and actions.flags.c_contiguous
+            and actions.shape == self._action_shape
+        ):
+            # Already what the native side takes (it checks the values): every microsecond here
+            # is one that the threads stepping the environments wait for.
+            return self._native.step(actions)
         actions = np.asarray(actions)
         if self._discrete:
             if actions.dtype.kind not in "iu":
@@ -144,9 +155,8 @@ class A2PerfVectorEnv(VectorEnv):
             if actions.dtype.kind not in "fiu":
                 raise TypeError(f"box actions must be real numbers, got dtype {actions.dtype}")
             actions = np.ascontiguousarray(actions, dtype=np.float32)
-        expected = (self.num_envs, *self.single_action_space.shape)
-        if actions.shape != expected:
-            raise ValueError(f"actions have shape {actions.shape}, expected {expected}")
+        if actions.shape != self._action_shape:
+            raise ValueError(f"actions have shape {actions.shape}, expected {self._action_shape}")
         return self._native.step(actions)
 
     def close_extras(self, **kwargs: Any) -> None:

@@ -204,12 +204,28 @@ impl PyVecEnv {
         if st.workers.as_ref().is_some_and(Crew::forked) {
             st.workers = worker_crew(n)?;
         }
-        let obs_bufs: Vec<Bound<'py, PyArrayDyn<f32>>> =
-            st.bufs.obs.iter().map(|b| b.bind(py).clone()).collect();
-        let rewards = st.bufs.rewards.bind(py).clone();
-        let terminated = st.bufs.terminated.bind(py).clone();
-        let truncated = st.bufs.truncated.bind(py).clone();
-        let masks = st.bufs.masks.as_ref().map(|m| m.bind(py).clone());
+        // copy=True: fresh arrays each call, written in place and handed over (nothing to copy
+        // afterwards); copy=False: the vector env's own buffers, overwritten by every call.
+        let (obs_bufs, rewards, terminated, truncated, masks) = if self.copy {
+            (
+                self.layout.buffers(py, n),
+                PyArray1::zeros(py, n, false),
+                PyArray1::zeros(py, n, false),
+                PyArray1::zeros(py, n, false),
+                st.bufs
+                    .masks
+                    .as_ref()
+                    .map(|m| PyArray2::zeros(py, [n, m.bind(py).shape()[1]], false)),
+            )
+        } else {
+            (
+                st.bufs.obs.iter().map(|b| b.bind(py).clone()).collect(),
+                st.bufs.rewards.bind(py).clone(),
+                st.bufs.terminated.bind(py).clone(),
+                st.bufs.truncated.bind(py).clone(),
+                st.bufs.masks.as_ref().map(|m| m.bind(py).clone()),
+            )
+        };
         {
             let mut obs_rw: Vec<_> = obs_bufs.iter().map(|b| b.readwrite()).collect();
             let mut rew_rw = rewards.readwrite();
@@ -260,28 +276,17 @@ impl PyVecEnv {
                 Some(pool) => run_pinned(pool, &mut st.slots, &mut outs, &one),
             })?;
         }
-        let copy = |a: Bound<'py, PyAny>| -> PyResult<Bound<'py, PyAny>> {
-            if self.copy {
-                a.call_method0(pyo3::intern!(py, "copy"))
-            } else {
-                Ok(a)
-            }
-        };
-        let obs = self.layout.wrap(
-            py,
-            obs_bufs
-                .into_iter()
-                .map(|b| copy(b.into_any()))
-                .collect::<PyResult<_>>()?,
-        )?;
-        let infos = self.infos(py, st, masks.map(|m| m.into_any()).map(&copy).transpose()?)?;
+        let obs = self
+            .layout
+            .wrap(py, obs_bufs.into_iter().map(Bound::into_any).collect())?;
+        let infos = self.infos(py, st, masks.map(Bound::into_any))?;
         PyTuple::new(
             py,
             [
                 obs,
-                copy(rewards.into_any())?,
-                copy(terminated.into_any())?,
-                copy(truncated.into_any())?,
+                rewards.into_any(),
+                terminated.into_any(),
+                truncated.into_any(),
                 infos.into_any(),
             ],
         )
@@ -314,12 +319,12 @@ impl PyVecEnv {
                     has[i] = true;
                 }
             }
-            d.set_item(k, PyArray1::from_vec(py, values))?;
-            d.set_item(format!("_{k}"), PyArray1::from_vec(py, has))?;
+            d.set_item(k, PyArray1::from_slice(py, &values))?;
+            d.set_item(format!("_{k}"), PyArray1::from_slice(py, &has))?;
         }
         if let Some(m) = masks {
             d.set_item(pyo3::intern!(py, "action_mask"), m)?;
-            d.set_item("_action_mask", PyArray1::from_vec(py, vec![true; n]))?;
+            d.set_item("_action_mask", PyArray1::from_slice(py, &vec![true; n]))?;
         }
         let illegal: Vec<bool> = st
             .slots
@@ -333,8 +338,8 @@ impl PyVecEnv {
             })
             .collect();
         if illegal.iter().any(|b| *b) {
-            d.set_item("illegal_action", PyArray1::from_vec(py, illegal.clone()))?;
-            d.set_item("_illegal_action", PyArray1::from_vec(py, illegal))?;
+            d.set_item("illegal_action", PyArray1::from_slice(py, &illegal))?;
+            d.set_item("_illegal_action", PyArray1::from_slice(py, &illegal))?;
         }
         if self.autoreset == Autoreset::SameStep && st.slots.iter().any(|s| s.ended) {
             let np = py.import("numpy")?;
@@ -366,9 +371,9 @@ impl PyVecEnv {
                 Ok(arr)
             };
             d.set_item("final_obs", as_objects(final_obs)?)?;
-            d.set_item("_final_obs", PyArray1::from_vec(py, ended.clone()))?;
+            d.set_item("_final_obs", PyArray1::from_slice(py, &ended))?;
             d.set_item("final_info", as_objects(final_info)?)?;
-            d.set_item("_final_info", PyArray1::from_vec(py, ended))?;
+            d.set_item("_final_info", PyArray1::from_slice(py, &ended))?;
         }
         Ok(d)
     }

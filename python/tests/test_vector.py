@@ -103,8 +103,22 @@ def test_copy_false_returns_the_preallocated_buffers() -> None:
     assert a is b or np.shares_memory(a, b)
     copying = A2PerfVectorEnv("QuadrupedLocomotion-DogPace-v0", num_envs=2)
     c, _ = copying.reset(seed=0)
-    d, *_ = copying.step(np.zeros((2, 12), np.float32))
+    d, r, te, tr, _ = copying.step(np.zeros((2, 12), np.float32))
     assert not np.shares_memory(c, d)
+    # What a step returned is the caller's: later steps do not touch it.
+    kept = [x.copy() for x in (d, r, te, tr)]
+    e, *_ = copying.step(np.ones((2, 12), np.float32))
+    assert not np.array_equal(e, d)
+    for x, y in zip(kept, (d, r, te, tr)):
+        np.testing.assert_array_equal(x, y)
+    web = A2PerfVectorEnv("WebNavigation-Difficulty-01-v0", num_envs=2)
+    web.reset(seed=0)
+    w1, *_, i1 = web.step(np.zeros(2, np.int64))
+    kept_web = ({k: v.copy() for k, v in w1.items()}, i1["action_mask"].copy())
+    web.step(np.ones(2, np.int64))
+    for k, v in kept_web[0].items():
+        np.testing.assert_array_equal(w1[k], v)
+    np.testing.assert_array_equal(i1["action_mask"], kept_web[1])
 
 
 def test_seeds_per_environment_and_bad_vector_input() -> None:
