@@ -2,9 +2,10 @@
 
 ``gymnasium.make_vec("a2perf/<id>", num_envs=N, vectorization_mode="vector_entry_point")``
 returns an :class:`A2PerfVectorEnv`. Observations, rewards and flags are written by the Rust
-threads into preallocated numpy arrays; with ``copy=True`` (the default, as Gymnasium's vector
-environments) each call returns copies of them, with ``copy=False`` the buffers themselves (valid
-until the next call).
+threads straight into numpy arrays: with ``copy=True`` (the default, as Gymnasium's vector
+environments) into fresh arrays each call, which are the caller's to keep; with ``copy=False``
+into the vector environment's own buffers, returned as they are and overwritten by the next
+call.
 
 Threads: ``min(N, cores)`` in all — the caller's and the vector environment's own workers — each
 stepping a fixed, contiguous share of the environments (an environment stays on one thread, its
@@ -40,7 +41,8 @@ class A2PerfVectorEnv(VectorEnv):
         env_id: The benchmark id (without namespace).
         num_envs: Number of environments.
         autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default) or ``AutoresetMode.SAME_STEP``.
-        copy: Return copies of the preallocated arrays (default) or the arrays themselves.
+        copy: Return fresh arrays each call (default) or the vector environment's own buffers,
+            overwritten by the next call.
         illegal_action, illegal_action_reward: As for :class:`a2perf_rs.envs.A2PerfEnv`.
         max_episode_steps: Ignored unless it equals the environment's own limit (Gymnasium passes
             the registered value, which is ``None`` here); the environments truncate themselves.

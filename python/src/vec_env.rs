@@ -1,7 +1,8 @@
 //! N environments stepped together in Rust threads with the GIL released (the engine of
 //! `a2perf_rs.vector.A2PerfVectorEnv`).
 //!
-//! Observations, rewards, flags and masks are written straight into preallocated numpy arrays;
+//! Observations, rewards, flags and masks are written straight into numpy arrays (fresh ones each
+//! call with `copy=True`, the vector env's own buffers with `copy=False`);
 //! the environments are split into one contiguous chunk per thread (the caller's and the vector
 //! environment's own workers, an [`a2perf_core::crew::Crew`]: `min(N, cores)` threads in all),
 //! each environment always on the same thread. Semantics are Gymnasium 1.x's: `reset(seed=s)`
