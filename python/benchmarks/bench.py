@@ -131,8 +131,8 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
     for v in vec.values():
         v.reset(seed=0)
     single.reset(seed=0)
-    # The native loop steps with random actions: a free-thread arm only for that workload.
     cpus = [c for c in (0, 1) if c in os.sched_getaffinity(0)] if hasattr(os, "sched_getaffinity") else []
+    # The native loop steps with random actions: native arms only for that workload.
     pinned = [f"cpu{c}" for c in cpus] if len(cpus) == 2 and not zero else []
     arms = ["single", *vec, *([] if zero else ["free1", "free2"]), *pinned]
     width = {"single": 1, "vec1": 1, "vec2": 2, "vec2_same_step": 2, "free1": 1, "free2": 2,
@@ -146,9 +146,22 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
     block_real: dict[str, list[float]] = {arm: [] for arm in vec}
     seeds = itertools.count()
 
-    def native_run() -> dict:
-        """The native loop alone (building its env is not timed), with its timeline."""
-        return a2perf_rs.bench(DOG, steps=per, seed=next(seeds), timeline=True)
+    def native_runs(n: int, cpu: int | None = None) -> list[dict]:
+        """The native loop on `n` threads at once (building an env is not timed), each with its
+        timeline; `cpu`: each thread pinned to that CPU (its own affinity only)."""
+        runs: list[dict] = []
+
+        def one() -> None:
+            if cpu is not None:
+                os.sched_setaffinity(0, {cpu})
+            runs.append(a2perf_rs.bench(DOG, steps=per, seed=next(seeds), timeline=True))
+
+        threads = [threading.Thread(target=one) for _ in range(n)]
+        for th in threads:
+            th.start()
+        for th in threads:
+            th.join()
+        return runs
 
     for b in range(blocks):
         for arm in arms[b % len(arms):] + arms[: b % len(arms)]:
@@ -174,26 +187,9 @@ def vector_speedup(blocks: int, per: int, zero: bool = False) -> dict:
                 dt = time.perf_counter() - t
                 transitions[arm] += real
                 block_real[arm].append(real / dt)
-            elif arm in pinned:
-                # One thread pinned to one CPU (affinity of that thread only), the loop's own timing.
-                rates_pinned: list[float] = []
-
-                def on_cpu(cpu: int = int(arm[3:])) -> None:
-                    os.sched_setaffinity(0, {cpu})
-                    rates_pinned.append(native_run()["steps_per_second"])
-
-                th = threading.Thread(target=on_cpu)
-                th.start()
-                th.join()
-                dt = per / rates_pinned[0]
             else:
-                # Free threads: the loops' own timing, summed over the threads that ran at once.
-                runs: list[dict] = []
-                threads = [threading.Thread(target=lambda: runs.append(native_run())) for _ in range(n)]
-                for th in threads:
-                    th.start()
-                for th in threads:
-                    th.join()
+                # Native threads: the loops' own timing, summed over the threads that ran at once.
+                runs = native_runs(n, int(arm[3:]) if arm in pinned else None)
                 rates = [r["steps_per_second"] for r in runs]
                 dt = per * n / sum(rates)
                 if n == 2:  # what lockstep could get from these two threads: the slower one, twice

@@ -56,6 +56,43 @@ struct SlotOut<'a> {
     mask: Option<&'a mut [i8]>,
 }
 
+/// The arrays one call writes its outcome into and returns.
+struct Arrays<'py> {
+    obs: Vec<Bound<'py, PyArrayDyn<f32>>>,
+    rewards: Bound<'py, PyArray1<f64>>,
+    terminated: Bound<'py, PyArray1<bool>>,
+    truncated: Bound<'py, PyArray1<bool>>,
+    /// `(N, actions)` for discrete action spaces.
+    masks: Option<Bound<'py, PyArray2<i8>>>,
+}
+
+impl<'py> Arrays<'py> {
+    /// Zeroed arrays for `n` environments (every element is written by each call).
+    fn new(py: Python<'py>, layout: &ObsLayout, n: usize, action: &ActionSpec) -> Self {
+        Self {
+            obs: layout.buffers(py, n),
+            rewards: PyArray1::zeros(py, n, false),
+            terminated: PyArray1::zeros(py, n, false),
+            truncated: PyArray1::zeros(py, n, false),
+            masks: match action {
+                ActionSpec::Discrete(k) => Some(PyArray2::zeros(py, [n, *k], false)),
+                ActionSpec::Box { .. } => None,
+            },
+        }
+    }
+
+    fn unbind(self) -> Buffers {
+        Buffers {
+            obs: self.obs.into_iter().map(Bound::unbind).collect(),
+            rewards: self.rewards.unbind(),
+            terminated: self.terminated.unbind(),
+            truncated: self.truncated.unbind(),
+            masks: self.masks.map(Bound::unbind),
+        }
+    }
+}
+
+/// `copy=False`: the vector env's own [`Arrays`], overwritten by every call.
 struct Buffers {
     obs: Vec<Py<PyArrayDyn<f32>>>,
     rewards: Py<PyArray1<f64>>,
@@ -64,12 +101,25 @@ struct Buffers {
     masks: Option<Py<PyArray2<i8>>>,
 }
 
+impl Buffers {
+    fn bind<'py>(&self, py: Python<'py>) -> Arrays<'py> {
+        Arrays {
+            obs: self.obs.iter().map(|b| b.bind(py).clone()).collect(),
+            rewards: self.rewards.bind(py).clone(),
+            terminated: self.terminated.bind(py).clone(),
+            truncated: self.truncated.bind(py).clone(),
+            masks: self.masks.as_ref().map(|m| m.bind(py).clone()),
+        }
+    }
+}
+
 struct State {
     slots: Vec<Slot>,
     /// The threads beside the caller's; `None` for one environment or one core.
     workers: Option<Crew>,
     actions: Vec<Action>,
-    bufs: Buffers,
+    /// `None` with `copy=True`: each call writes into fresh arrays, which it hands over.
+    bufs: Option<Buffers>,
     closed: bool,
 }
 
@@ -82,7 +132,6 @@ pub struct PyVecEnv {
     spec: a2perf_core::EnvSpec,
     params: std::collections::BTreeMap<String, a2perf_core::Value>,
     autoreset: Autoreset,
-    copy: bool,
 }
 
 fn write_obs(layout: &ObsLayout, obs: &Observation, out: &mut SlotOut<'_>) -> PyResult<()> {
@@ -205,27 +254,15 @@ impl PyVecEnv {
         if st.workers.as_ref().is_some_and(Crew::forked) {
             st.workers = worker_crew(n)?;
         }
-        // copy=True: fresh arrays each call, written in place and handed over (nothing to copy
-        // afterwards); copy=False: the vector env's own buffers, overwritten by every call.
-        let (obs_bufs, rewards, terminated, truncated, masks) = if self.copy {
-            (
-                self.layout.buffers(py, n),
-                PyArray1::zeros(py, n, false),
-                PyArray1::zeros(py, n, false),
-                PyArray1::zeros(py, n, false),
-                st.bufs
-                    .masks
-                    .as_ref()
-                    .map(|m| PyArray2::zeros(py, [n, m.bind(py).shape()[1]], false)),
-            )
-        } else {
-            (
-                st.bufs.obs.iter().map(|b| b.bind(py).clone()).collect(),
-                st.bufs.rewards.bind(py).clone(),
-                st.bufs.terminated.bind(py).clone(),
-                st.bufs.truncated.bind(py).clone(),
-                st.bufs.masks.as_ref().map(|m| m.bind(py).clone()),
-            )
+        let Arrays {
+            obs: obs_bufs,
+            rewards,
+            terminated,
+            truncated,
+            masks,
+        } = match &st.bufs {
+            Some(bufs) => bufs.bind(py),
+            None => Arrays::new(py, &self.layout, n, &self.action),
         };
         {
             let mut obs_rw: Vec<_> = obs_bufs.iter().map(|b| b.readwrite()).collect();
@@ -498,25 +535,7 @@ impl PyVecEnv {
         };
         let layout = ObsLayout::of(py, &spec.observation_space)?;
         let action = ActionSpec::of(&spec.action_space)?;
-        let masks = match spec.action_space {
-            a2perf_core::Space::Discrete { n } => Some(
-                PyArray1::<i8>::from_vec(py, vec![1; num_envs * n])
-                    .reshape([num_envs, n])?
-                    .unbind(),
-            ),
-            _ => None,
-        };
-        let bufs = Buffers {
-            obs: layout
-                .buffers(py, num_envs)
-                .into_iter()
-                .map(Bound::unbind)
-                .collect(),
-            rewards: PyArray1::zeros(py, num_envs, false).unbind(),
-            terminated: PyArray1::from_vec(py, vec![false; num_envs]).unbind(),
-            truncated: PyArray1::from_vec(py, vec![false; num_envs]).unbind(),
-            masks,
-        };
+        let bufs = (!copy).then(|| Arrays::new(py, &layout, num_envs, &action).unbind());
         let actions = match action {
             ActionSpec::Discrete(_) => vec![Action::Discrete(0); num_envs],
             ActionSpec::Box { .. } => vec![Action::Continuous(Vec::new()); num_envs],
@@ -534,7 +553,6 @@ impl PyVecEnv {
             spec,
             params,
             autoreset,
-            copy,
         })
     }
 
