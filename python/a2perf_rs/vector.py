@@ -9,8 +9,10 @@ call.
 
 Threads: ``min(N, cores)`` in all — the caller's and the vector environment's own workers — each
 stepping a fixed, contiguous share of the environments (an environment stays on one thread, its
-state in that core's cache). Between steps the workers spin for up to 200 µs before sleeping, so
-an agent that returns quickly does not pay a thread wake-up per step.
+state in that core's cache), and each environment is built on the thread that steps it, all at
+once. Between steps the workers spin for up to 200 µs before sleeping, so an agent that returns
+quickly does not pay a thread wake-up per step; within a step the caller waits for the workers
+awake for about as long as their shares usually take (2 ms at most).
 
 Semantics are Gymnasium 1.x's: ``reset(seed=s)`` seeds environment ``i`` with ``s + i`` (a list
 gives one seed per environment); later resets continue each environment's own random stream; the

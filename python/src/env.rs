@@ -97,14 +97,22 @@ pub fn make_env(
     id: &str,
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(Box<dyn Env>, BTreeMap<String, Value>)> {
+    build_env(id, &env_kwargs(kwargs)?)
+}
+
+/// Builds environment `id` from typed parameters (no Python needed: callable on any thread);
+/// returns it with every parameter in force (defaults included).
+pub fn build_env(
+    id: &str,
+    params: &BTreeMap<String, Value>,
+) -> PyResult<(Box<dyn Env>, BTreeMap<String, Value>)> {
     let reg = registry();
-    let params = env_kwargs(kwargs)?;
     let kind_of = |key: &str| param_kind(id, key);
     let resolved = reg
-        .env_params(id, &params)
+        .env_params(id, params)
         .map_err(|e| registry_error(e, kind_of))?;
     let env = guard("building the environment", || {
-        reg.make_env(id, &params)
+        reg.make_env(id, params)
             .map_err(|e| registry_error(e, kind_of))
     })?;
     Ok((env, resolved.values().clone()))

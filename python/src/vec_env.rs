@@ -5,7 +5,7 @@
 //! call with `copy=True`, the vector env's own buffers with `copy=False`);
 //! the environments are split into one contiguous chunk per thread (the caller's and the vector
 //! environment's own workers, an [`a2perf_core::crew::Crew`]: `min(N, cores)` threads in all),
-//! each environment always on the same thread. Semantics are Gymnasium 1.x's: `reset(seed=s)`
+//! each environment built on and always stepped by the same thread. Semantics are Gymnasium 1.x's: `reset(seed=s)`
 //! seeds environment `i` with `s + i` (as `SyncVectorEnv` does), later resets continue each
 //! environment's own stream, and the autoreset mode is next-step (default) or same-step. So N
 //! single environments reset with seeds `s + i` and stepped with the same actions produce the same
@@ -24,7 +24,9 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 
 use crate::convert::{ActionSpec, type_name_of};
-use crate::env::{EpisodeCore, IllegalAction, ObsLayout, guard_close, make_env, spec_to_py};
+use crate::env::{
+    EpisodeCore, IllegalAction, ObsLayout, build_env, env_kwargs, guard_close, spec_to_py,
+};
 
 /// Gymnasium's autoreset modes that are supported.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -180,23 +182,82 @@ where
         .try_for_each(|(i, (slot, out))| one(first + i, slot, out))
 }
 
-/// Runs `one` over the slots split into contiguous chunks, one per thread: the calling thread
-/// takes the first chunk and worker `k` of `crew` always chunk `k`. An environment so stays on
-/// one thread from step to step (its state stays in that core's cache) and the caller works
-/// instead of waiting. Returns the error of the lowest-numbered failing environment's chunk.
+/// How many threads step `n` environments with `crew` (the caller's and its workers'): one
+/// per environment at most.
+fn threads(crew: Option<&Crew>, n: usize) -> usize {
+    crew.map_or(1, |c| c.workers() + 1).min(n)
+}
+
+/// The environments that thread `k` of `parts` steps: a contiguous chunk, the chunks' sizes
+/// differing by one at most. Thread 0 is the caller, thread `k ≥ 1` worker `k` of the crew.
+fn chunk(n: usize, parts: usize, k: usize) -> std::ops::Range<usize> {
+    k * n / parts..(k + 1) * n / parts
+}
+
+/// Builds environment `i` as `build(i)` for `i < n`, each on the thread that will step it
+/// ([`chunk`]), the threads at once (a browser-backed environment starts its browser in
+/// parallel); an environment's memory so comes from that thread's allocator and is first
+/// touched by its core. Returns the error of the lowest-numbered environment that failed.
+fn build_on_threads<T: Send>(
+    py: Python<'_>,
+    crew: Option<&Crew>,
+    n: usize,
+    build: impl Fn(usize) -> PyResult<T> + Sync,
+) -> PyResult<Vec<T>> {
+    let built: Vec<Mutex<Option<PyResult<T>>>> = (0..n).map(|_| Mutex::new(None)).collect();
+    let parts = threads(crew, n);
+    let job = |k: usize| {
+        if k < parts {
+            for i in chunk(n, parts, k) {
+                let b = build(i);
+                *built[i].lock().unwrap_or_else(PoisonError::into_inner) = Some(b);
+            }
+        }
+    };
+    let finished = py.detach(|| match crew {
+        Some(c) => c.run(&job),
+        None => {
+            job(0);
+            true
+        }
+    });
+    if !finished {
+        return Err(PyRuntimeError::new_err(
+            "a worker thread panicked while building the environments",
+        ));
+    }
+    built
+        .into_iter()
+        .map(|b| {
+            b.into_inner()
+                .unwrap_or_else(PoisonError::into_inner)
+                .unwrap_or_else(|| {
+                    Err(PyRuntimeError::new_err(
+                        "internal error: an environment was not built",
+                    ))
+                })
+        })
+        .collect()
+}
+
+/// Runs `one` over the slots split into contiguous chunks, one per thread ([`chunk`]): the
+/// calling thread takes the first chunk and worker `k` of `crew` always chunk `k`. An
+/// environment so stays on one thread from step to step (its state stays in that core's cache)
+/// and the caller works instead of waiting. Returns the error of the lowest-numbered failing
+/// environment's chunk.
 fn run_pinned<F>(crew: &Crew, slots: &mut [Slot], outs: &mut [SlotOut<'_>], one: &F) -> PyResult<()>
 where
     F: Fn(usize, &mut Slot, &mut SlotOut<'_>) -> PyResult<()> + Sync,
 {
     let n = slots.len();
-    let parts = (crew.workers() + 1).min(n);
+    let parts = threads(Some(crew), n);
     let mut chunks = Vec::with_capacity(parts);
     let (mut slots, mut outs) = (slots, outs);
     for k in 0..parts {
-        let len = (k + 1) * n / parts - k * n / parts;
-        let (s, s_rest) = std::mem::take(&mut slots).split_at_mut(len);
-        let (o, o_rest) = std::mem::take(&mut outs).split_at_mut(len);
-        chunks.push(Mutex::new((k * n / parts, s, o, Ok(()))));
+        let range = chunk(n, parts, k);
+        let (s, s_rest) = std::mem::take(&mut slots).split_at_mut(range.len());
+        let (o, o_rest) = std::mem::take(&mut outs).split_at_mut(range.len());
+        chunks.push(Mutex::new((range.start, s, o, Ok(()))));
         (slots, outs) = (s_rest, o_rest);
     }
     let finished = crew.run(&|k| {
@@ -509,26 +570,31 @@ impl PyVecEnv {
                 )));
             }
         };
-        let mut slots = Vec::with_capacity(num_envs);
-        let mut first = None;
-        for i in 0..num_envs {
-            let (env, resolved) = make_env(env_id, params)?;
+        let kwargs = env_kwargs(params)?;
+        let workers = worker_crew(num_envs)?;
+        let built = build_on_threads(py, workers.as_ref(), num_envs, |i| {
+            let (env, resolved) = build_env(env_id, &kwargs)?;
             let policy = IllegalAction::parse(illegal_action, illegal_action_reward, &resolved)?;
-            if first.is_none() {
-                first = Some((env.spec().clone(), resolved));
-            }
+            let spec = (i == 0).then(|| (env.spec().clone(), resolved));
             let mut core = EpisodeCore::new(env, policy);
             if let Some(run_seed) = episode_seeds {
                 core = core.with_episode_seeds(run_seed, i);
             }
-            slots.push(Slot {
+            let slot = Slot {
                 core,
                 pending_reset: false,
                 ended: false,
                 final_obs: Observation::default(),
                 final_info: Default::default(),
                 final_illegal: false,
-            });
+            };
+            Ok((slot, spec))
+        })?;
+        let mut first = None;
+        let mut slots = Vec::with_capacity(num_envs);
+        for (slot, spec) in built {
+            first = first.or(spec);
+            slots.push(slot);
         }
         let Some((spec, params)) = first else {
             return Err(PyValueError::new_err("num_envs must be at least 1"));
@@ -546,7 +612,7 @@ impl PyVecEnv {
                 actions,
                 bufs,
                 closed: false,
-                workers: worker_crew(num_envs)?,
+                workers,
             }),
             layout,
             action,

@@ -149,6 +149,53 @@ def test_seeds_per_environment_and_bad_vector_input() -> None:
         venv.reset(seed=0)
 
 
+def test_building_on_several_threads_reports_bad_parameters_and_files(tmp_path) -> None:
+    # Each environment is built on the thread that steps it; errors still name the problem.
+    dog = "QuadrupedLocomotion-DogPace-v0"
+    with pytest.raises(TypeError, match=r"unknown parameter `episode_stepz`.*did you mean"):
+        A2PerfVectorEnv(dog, num_envs=3, episode_stepz=3)
+    with pytest.raises(FileNotFoundError, match="missing.txt"):
+        A2PerfVectorEnv(dog, num_envs=3, motion_file=str(tmp_path / "missing.txt"))
+    # Built on different threads, the environments still start from the same state.
+    venv = A2PerfVectorEnv(dog, num_envs=3)
+    obs, _ = venv.reset(seed=[4, 4, 4])
+    assert np.array_equal(obs[0], obs[1]) and np.array_equal(obs[0], obs[2])
+    venv.close()
+
+
+def test_a_chromium_vector_env_equals_single_ones_and_close_stops_the_browsers() -> None:
+    from test_envs import _children
+
+    from conftest import require_chromium
+
+    require_chromium()
+    env_id, params = "WebNavigation-Difficulty-01-v0", {"backend": "chromium", "num_websites": 1}
+    before = _children()
+    venv = A2PerfVectorEnv(env_id, num_envs=2, **params)
+    browsers = _children() - before
+    assert len(browsers) >= 2, "each environment of the vector env starts its own browser"
+    singles = [A2PerfEnv(env_id, **params) for _ in range(2)]
+    obs, infos = venv.reset(seed=11)
+    for i, env in enumerate(singles):
+        assert _equal(_row(obs, i), env.reset(seed=11 + i)[0])
+    rng = np.random.default_rng(1)
+    ended = [False, False]
+    for _ in range(6):
+        actions = _actions(venv, infos, rng)
+        obs, rewards, terms, truncs, infos = venv.step(actions)
+        for i, env in enumerate(singles):
+            if ended[i]:
+                o, r, te, tr = env.reset()[0], 0.0, False, False
+            else:
+                o, r, te, tr, _ = env.step(actions[i])
+            ended[i] = te or tr
+            assert _equal(_row(obs, i), o) and (rewards[i], terms[i], truncs[i]) == (r, te, tr)
+    for env in singles:
+        env.close()
+    venv.close()
+    assert not (_children() - before), "close() must stop every environment's browser"
+
+
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="os.fork is POSIX-only")
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")  # fork() of a multi-threaded process
 def test_a_forked_child_steps_the_inherited_vector_env_like_the_parent() -> None:
