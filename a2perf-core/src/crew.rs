@@ -10,11 +10,6 @@
 //! pinning. The spin is bounded by [`SPIN`], so an agent that thinks longer between steps costs
 //! one core that long and no more.
 //!
-//! The caller, once its own part is done, waits for the workers awake for about as long as
-//! their parts usually take ([`caller_wait_budget`], at most [`CALLER_WAIT_AWAKE`]), yielding its
-//! core past [`SPIN`]: when one environment only resets while the other steps, the caller used
-//! to fall asleep after 200 µs and paid a wake-up (43 µs on average) at the end of the job.
-//!
 //! Threads do not survive `fork()`: in a child process the crew has no workers, so
 //! [`Crew::run`] notices the new process ([`Crew::forked`]) and runs every part on the calling
 //! thread instead of waiting forever for workers that do not exist there.
@@ -28,34 +23,6 @@ use std::time::{Duration, Instant};
 /// How long an idle thread spins before it sleeps: a worker waiting for the next job, the caller
 /// waiting for the workers.
 pub const SPIN: Duration = Duration::from_micros(200);
-
-/// The longest the caller keeps waiting awake for a worker's part, when the workers' parts take
-/// about that long: past [`SPIN`] it yields its core to any other runnable thread instead of
-/// sleeping, because on a virtual machine waking a sleeping vCPU costs tens of microseconds
-/// (measured on DogPace, N = 2: 43 µs per wake-up on average, 200 µs at the 99th percentile).
-/// Longer parts (a browser step) are waited for asleep after [`SPIN`].
-pub const CALLER_WAIT_AWAKE: Duration = Duration::from_millis(2);
-
-/// How long the caller waits awake for a worker whose parts take about `part` (from the job's
-/// start): that and a quarter more, at least [`SPIN`]; only [`SPIN`] when that exceeds
-/// [`CALLER_WAIT_AWAKE`].
-///
-/// ```
-/// use std::time::Duration;
-/// use a2perf_core::crew::{CALLER_WAIT_AWAKE, SPIN, caller_wait_budget};
-///
-/// assert_eq!(caller_wait_budget(Duration::ZERO), SPIN);
-/// assert_eq!(caller_wait_budget(Duration::from_micros(800)), Duration::from_micros(1000));
-/// assert_eq!(caller_wait_budget(CALLER_WAIT_AWAKE * 2), SPIN);
-/// ```
-pub fn caller_wait_budget(part: Duration) -> Duration {
-    let awake = part + part / 4;
-    if awake > CALLER_WAIT_AWAKE {
-        SPIN
-    } else {
-        awake.max(SPIN)
-    }
-}
 
 /// A job as the workers see it: part `k` (1-based; the caller runs part 0), its lifetime erased.
 type Job = dyn Fn(usize) + Sync + 'static;
@@ -78,10 +45,6 @@ struct Shared {
     job: Mutex<Option<(JobPtr, Thread)>>,
     /// The current job panicked on this worker.
     panicked: AtomicBool,
-    /// How long this worker's part of a job takes, in nanoseconds: the last part's length, or
-    /// an earlier longer one decaying by an eighth per job (so that one short part, an
-    /// environment's reset, does not hide the usual length).
-    part_ns: AtomicU64,
     /// The crew is being dropped.
     stop: AtomicBool,
 }
@@ -116,7 +79,6 @@ impl Crew {
                 finished: AtomicU64::new(0),
                 job: Mutex::new(None),
                 panicked: AtomicBool::new(false),
-                part_ns: AtomicU64::new(0),
                 stop: AtomicBool::new(false),
             });
             let mine = Arc::clone(&shared);
@@ -164,7 +126,6 @@ impl Crew {
             std::mem::transmute::<*const (dyn Fn(usize) + Sync + 'a), *const Job>(short)
         });
         let me = thread::current();
-        let start = Instant::now();
         for (shared, handle) in &self.workers {
             *shared.job.lock().unwrap_or_else(PoisonError::into_inner) = Some((ptr, me.clone()));
             shared.posted.fetch_add(1, Ordering::Release);
@@ -172,7 +133,7 @@ impl Crew {
                 h.thread().unpark();
             }
         }
-        let wait = Wait(self, start);
+        let wait = Wait(self);
         job(0);
         drop(wait);
         self.workers
@@ -181,20 +142,14 @@ impl Crew {
     }
 }
 
-/// Waits for every worker to finish the current job (posted at `.1`), also while the caller
-/// unwinds: awake for as long as [`caller_wait_budget`] of the worker's usual part allows.
-struct Wait<'a>(&'a Crew, Instant);
+/// Waits for every worker to finish the current job, also while the caller unwinds.
+struct Wait<'a>(&'a Crew);
 
 impl Drop for Wait<'_> {
     fn drop(&mut self) {
         for (shared, _) in &self.0.workers {
             let target = shared.posted.load(Ordering::Relaxed);
-            let part = Duration::from_nanos(shared.part_ns.load(Ordering::Relaxed));
-            idle_until(
-                || shared.finished.load(Ordering::Acquire) >= target,
-                self.1,
-                caller_wait_budget(part),
-            );
+            idle_until(|| shared.finished.load(Ordering::Acquire) >= target);
         }
     }
 }
@@ -220,21 +175,14 @@ impl Drop for Crew {
     }
 }
 
-/// Waits until `ready()`: spinning until [`SPIN`] after `start`, then yielding the core between
-/// checks until `awake` after `start`, then asleep until woken (`unpark`), checking again.
-fn idle_until(ready: impl Fn() -> bool, start: Instant, awake: Duration) {
+/// Spins until `ready()` for up to [`SPIN`], then sleeps until woken (`unpark`) and checks again.
+fn idle_until(ready: impl Fn() -> bool) {
+    let start = Instant::now();
     let mut spins = 0u32;
-    let mut elapsed = Duration::ZERO;
     while !ready() {
         spins = spins.wrapping_add(1);
-        if spins.is_multiple_of(64) {
-            elapsed = start.elapsed();
-        }
-        if elapsed < SPIN {
+        if !spins.is_multiple_of(64) || start.elapsed() < SPIN {
             std::hint::spin_loop();
-        } else if elapsed < awake {
-            thread::yield_now();
-            elapsed = start.elapsed();
         } else {
             // The other side sets the condition, then unparks: an unpark between the check and
             // this park leaves a token, so no wake-up is lost. The timeout is a safety net that
@@ -244,21 +192,13 @@ fn idle_until(ready: impl Fn() -> bool, start: Instant, awake: Duration) {
     }
 }
 
-/// A worker's usual part length after a part that `took` nanoseconds, given the estimate
-/// `before`: the longer of the two, the earlier one decaying by an eighth per job.
-fn usual_part_ns(before: u64, took: u64) -> u64 {
-    took.max(before - before / 8)
-}
-
 /// A worker's loop: wait for a job, run part `k`, report, repeat.
 fn work(k: usize, shared: &Shared) {
     let mut done = 0u64;
     loop {
-        idle_until(
-            || shared.posted.load(Ordering::Acquire) > done || shared.stop.load(Ordering::Acquire),
-            Instant::now(),
-            SPIN,
-        );
+        idle_until(|| {
+            shared.posted.load(Ordering::Acquire) > done || shared.stop.load(Ordering::Acquire)
+        });
         if shared.stop.load(Ordering::Acquire) {
             return;
         }
@@ -271,13 +211,9 @@ fn work(k: usize, shared: &Shared) {
         if let Some((JobPtr(job), caller)) = current {
             // SAFETY: the caller is inside `Crew::run` until `finished` reaches `done`.
             let job = unsafe { &*job };
-            let began = Instant::now();
             if catch_unwind(AssertUnwindSafe(|| job(k))).is_err() {
                 shared.panicked.store(true, Ordering::Release);
             }
-            let took = u64::try_from(began.elapsed().as_nanos()).unwrap_or(u64::MAX);
-            let usual = usual_part_ns(shared.part_ns.load(Ordering::Relaxed), took);
-            shared.part_ns.store(usual, Ordering::Relaxed);
             shared.finished.store(done, Ordering::Release);
             caller.unpark();
         } else {
@@ -290,34 +226,6 @@ fn work(k: usize, shared: &Shared) {
 mod tests {
     use super::*;
     use std::sync::atomic::AtomicUsize;
-
-    #[test]
-    fn the_usual_part_length_follows_longer_parts_at_once_and_shorter_ones_slowly() {
-        assert_eq!(usual_part_ns(0, 800_000), 800_000);
-        // One short part (an environment's reset) barely moves the estimate...
-        assert_eq!(usual_part_ns(800_000, 50_000), 700_000);
-        // ... a longer one replaces it.
-        assert_eq!(usual_part_ns(700_000, 900_000), 900_000);
-        // Parts that stay short bring it down within a few dozen jobs.
-        let after = (0..40).fold(2_000_000, |est, _| usual_part_ns(est, 50_000));
-        assert_eq!(after, 50_000);
-        assert_eq!(usual_part_ns(u64::MAX, 0), u64::MAX - u64::MAX / 8);
-    }
-
-    #[test]
-    fn the_caller_learns_how_long_a_workers_part_takes() {
-        let crew = Crew::new(1, "test-crew").unwrap();
-        let part = Duration::from_millis(3);
-        assert!(crew.run(&|k| {
-            if k == 1 {
-                thread::sleep(part);
-            }
-        }));
-        let learned = Duration::from_nanos(crew.workers[0].0.part_ns.load(Ordering::Relaxed));
-        assert!(learned >= part, "{learned:?}");
-        // Longer than the caller keeps awake for: it sleeps after the spin.
-        assert_eq!(caller_wait_budget(learned), SPIN);
-    }
 
     #[test]
     fn every_part_runs_once_per_job_on_its_own_thread() {

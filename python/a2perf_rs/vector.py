@@ -11,8 +11,7 @@ Threads: ``min(N, cores)`` in all — the caller's and the vector environment's 
 stepping a fixed, contiguous share of the environments (an environment stays on one thread, its
 state in that core's cache), and each environment is built on the thread that steps it, all at
 once. Between steps the workers spin for up to 200 µs before sleeping, so an agent that returns
-quickly does not pay a thread wake-up per step; within a step the caller waits for the workers
-awake for about as long as their shares usually take (2 ms at most).
+quickly does not pay a thread wake-up per step.
 
 Semantics are Gymnasium 1.x's: ``reset(seed=s)`` seeds environment ``i`` with ``s + i`` (a list
 gives one seed per environment); later resets continue each environment's own random stream; the
