@@ -5,11 +5,11 @@
 //! call with `copy=True`, the vector env's own buffers with `copy=False`);
 //! the environments are split into one contiguous chunk per thread (the caller's and the vector
 //! environment's own workers, an [`a2perf_core::crew::Crew`]: `min(N, cores)` threads in all),
-//! each environment built on and always stepped by the same thread. Semantics are Gymnasium 1.x's: `reset(seed=s)`
-//! seeds environment `i` with `s + i` (as `SyncVectorEnv` does), later resets continue each
-//! environment's own stream, and the autoreset mode is next-step (default) or same-step. So N
-//! single environments reset with seeds `s + i` and stepped with the same actions produce the same
-//! trajectories, which the tests check.
+//! each environment built on and always stepped by the same thread. Semantics are Gymnasium
+//! 1.x's: `reset(seed=s)` seeds environment `i` with `s + i` (as `SyncVectorEnv` does), later
+//! resets continue each environment's own stream, and the autoreset mode is next-step (default)
+//! or same-step. So N single environments reset with seeds `s + i` and stepped with the same
+//! actions produce the same trajectories, which the tests check.
 
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
