@@ -575,7 +575,6 @@ impl PyVecEnv {
         let built = build_on_threads(py, workers.as_ref(), num_envs, |i| {
             let (env, resolved) = build_env(env_id, &kwargs)?;
             let policy = IllegalAction::parse(illegal_action, illegal_action_reward, &resolved)?;
-            let spec = (i == 0).then(|| (env.spec().clone(), resolved));
             let mut core = EpisodeCore::new(env, policy);
             if let Some(run_seed) = episode_seeds {
                 core = core.with_episode_seeds(run_seed, i);
@@ -588,17 +587,14 @@ impl PyVecEnv {
                 final_info: Default::default(),
                 final_illegal: false,
             };
-            Ok((slot, spec))
+            Ok((slot, resolved))
         })?;
-        let mut first = None;
-        let mut slots = Vec::with_capacity(num_envs);
-        for (slot, spec) in built {
-            first = first.or(spec);
-            slots.push(slot);
-        }
-        let Some((spec, params)) = first else {
+        let (slots, resolved): (Vec<Slot>, Vec<_>) = built.into_iter().unzip();
+        // Every copy has the same spec and parameters: environment 0's stand for all.
+        let (Some(first), Some(params)) = (slots.first(), resolved.into_iter().next()) else {
             return Err(PyValueError::new_err("num_envs must be at least 1"));
         };
+        let spec = first.core.env.spec().clone();
         let layout = ObsLayout::of(py, &spec.observation_space)?;
         let action = ActionSpec::of(&spec.action_space)?;
         let bufs = (!copy).then(|| Arrays::new(py, &layout, num_envs, &action).unbind());

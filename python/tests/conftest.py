@@ -1,4 +1,4 @@
-"""Shared fixtures: the reference data in ../shared/data and the Chromium check.
+"""Shared fixtures: the reference data in ../shared/data, the Chromium check, child processes.
 
 Tests that need ../shared/data skip with a reason when it is absent, unless
 A2PERF_REQUIRE_SHARED=1; Chromium tests skip when no browser is installed, unless
@@ -35,6 +35,23 @@ def require_chromium() -> None:
         if os.environ.get("A2PERF_REQUIRE_CHROME") == "1":
             pytest.fail(f"A2PERF_REQUIRE_CHROME=1 but {reason}")
         pytest.skip(f"Chromium unavailable: {reason}")
+
+
+def child_pids() -> set[int]:
+    """The ids of this process's child processes (a Chromium backend's chromedriver)."""
+    me = str(os.getpid())
+    out = set()
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if fields[1] == me:
+            out.add(int(pid))
+    return out
 
 
 def file_kwargs(env_id: str) -> dict[str, str]:

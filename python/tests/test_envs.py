@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -11,7 +9,7 @@ from gymnasium.utils.env_checker import check_env
 
 import a2perf_rs
 from a2perf_rs import A2PerfEnv
-from conftest import file_kwargs, require_chromium, shared
+from conftest import child_pids, file_kwargs, require_chromium, shared
 
 ALL_IDS = a2perf_rs.env_ids()
 WEB_IDS = [i for i in ALL_IDS if "WebNavigation" in i]
@@ -202,30 +200,14 @@ def test_a_circuit_episode_ends_with_the_proxy_cost() -> None:
     assert info["proxy"] > 0 and total == pytest.approx(-info["proxy"])
 
 
-def _children() -> set[int]:
-    me = str(os.getpid())
-    out = set()
-    for pid in os.listdir("/proc"):
-        if not pid.isdigit():
-            continue
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if fields[1] == me:
-            out.add(int(pid))
-    return out
-
-
 def test_close_releases_the_chromium_backend() -> None:
     require_chromium()
-    before = _children()
+    before = child_pids()
     env = gym.make("a2perf/WebNavigation-Difficulty-01-v0", backend="chromium", num_websites=1)
     env.reset(seed=0)
-    assert _children() - before, "the Chromium backend should run as a child process"
+    assert child_pids() - before, "the Chromium backend should run as a child process"
     env.close()
-    assert not (_children() - before), "close() must stop chromedriver and the browser"
+    assert not (child_pids() - before), "close() must stop chromedriver and the browser"
     env.close()  # twice is fine
     with pytest.raises(RuntimeError, match="closed"):
         env.unwrapped.reset(seed=0)

@@ -13,6 +13,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 from a2perf_rs import A2PerfEnv, A2PerfVectorEnv
+from conftest import child_pids, require_chromium
 
 CASES = [
     ("CircuitTraining-Synthetic-Small-v0", {"std_cell_placer": "none"}, 40),
@@ -39,22 +40,17 @@ def _actions(venv: A2PerfVectorEnv, infos, rng: np.random.Generator) -> np.ndarr
     return rng.uniform(-0.4, 0.4, (venv.num_envs, 12)).astype(np.float32)
 
 
-@pytest.mark.parametrize(("env_id", "params", "steps"), CASES)
-def test_vector_equals_n_single_environments(env_id: str, params: dict, steps: int) -> None:
-    n = 3
-    venv = gym.make_vec(
-        f"a2perf/{env_id}", num_envs=n, vectorization_mode="vector_entry_point", **params
-    )
-    assert isinstance(venv, gym.vector.VectorEnv)
-    assert venv.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
-    singles = [A2PerfEnv(env_id, **params) for _ in range(n)]
-    obs, infos = venv.reset(seed=7)
+def _replay_against_singles(venv, singles: list[A2PerfEnv], seed: int, steps: int) -> int:
+    """Resets `venv` with `seed` and environment i of `singles` with `seed + i`, steps them all
+    with the same random actions (next-step autoreset replayed by hand on the singles) and asserts
+    every observation, reward, flag and action mask equal; returns the episodes that ended."""
+    obs, infos = venv.reset(seed=seed)
     for i, env in enumerate(singles):
-        o, _ = env.reset(seed=7 + i)
+        o, _ = env.reset(seed=seed + i)
         assert _equal(_row(obs, i), o)
     assert obs in venv.observation_space
     rng = np.random.default_rng(0)
-    ended = [False] * n
+    ended = [False] * len(singles)
     episodes = 0
     for _ in range(steps):
         actions = _actions(venv, infos, rng)
@@ -71,6 +67,19 @@ def test_vector_equals_n_single_environments(env_id: str, params: dict, steps: i
             assert (rewards[i], terms[i], truncs[i]) == (r, te, tr)
             if "action_mask" in info:
                 np.testing.assert_array_equal(infos["action_mask"][i], info["action_mask"])
+    return episodes
+
+
+@pytest.mark.parametrize(("env_id", "params", "steps"), CASES)
+def test_vector_equals_n_single_environments(env_id: str, params: dict, steps: int) -> None:
+    n = 3
+    venv = gym.make_vec(
+        f"a2perf/{env_id}", num_envs=n, vectorization_mode="vector_entry_point", **params
+    )
+    assert isinstance(venv, gym.vector.VectorEnv)
+    assert venv.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    singles = [A2PerfEnv(env_id, **params) for _ in range(n)]
+    episodes = _replay_against_singles(venv, singles, seed=7, steps=steps)
     assert episodes >= n, "the run should cover autoresets"
     venv.close()
 
@@ -164,36 +173,17 @@ def test_building_on_several_threads_reports_bad_parameters_and_files(tmp_path) 
 
 
 def test_a_chromium_vector_env_equals_single_ones_and_close_stops_the_browsers() -> None:
-    from test_envs import _children
-
-    from conftest import require_chromium
-
     require_chromium()
     env_id, params = "WebNavigation-Difficulty-01-v0", {"backend": "chromium", "num_websites": 1}
-    before = _children()
+    before = child_pids()
     venv = A2PerfVectorEnv(env_id, num_envs=2, **params)
-    browsers = _children() - before
-    assert len(browsers) >= 2, "each environment of the vector env starts its own browser"
+    assert len(child_pids() - before) >= 2, "each environment starts its own browser"
     singles = [A2PerfEnv(env_id, **params) for _ in range(2)]
-    obs, infos = venv.reset(seed=11)
-    for i, env in enumerate(singles):
-        assert _equal(_row(obs, i), env.reset(seed=11 + i)[0])
-    rng = np.random.default_rng(1)
-    ended = [False, False]
-    for _ in range(6):
-        actions = _actions(venv, infos, rng)
-        obs, rewards, terms, truncs, infos = venv.step(actions)
-        for i, env in enumerate(singles):
-            if ended[i]:
-                o, r, te, tr = env.reset()[0], 0.0, False, False
-            else:
-                o, r, te, tr, _ = env.step(actions[i])
-            ended[i] = te or tr
-            assert _equal(_row(obs, i), o) and (rewards[i], terms[i], truncs[i]) == (r, te, tr)
+    _replay_against_singles(venv, singles, seed=11, steps=6)
     for env in singles:
         env.close()
     venv.close()
-    assert not (_children() - before), "close() must stop every environment's browser"
+    assert not (child_pids() - before), "close() must stop every environment's browser"
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="os.fork is POSIX-only")
