@@ -48,14 +48,21 @@
 //! zero-padded to 3500, port clusters are not included, and `mask`, `fake_net_heatmap` and
 //! `netlist_index` are not tensors (the README's "Differences from the original A2Perf" says
 //! why).
+//!
+//! # Rendering
+//! [`Env::render`] draws the current placement, on demand only: `"rgb_array"` rasterizes it
+//! ([`render_rgb`], [`RGB_SIZE`] pixels on the longer canvas side) and `"svg"` returns
+//! [`render_svg`]'s picture ([`SVG_SIZE`] pixels, titled with the netlist's name: what
+//! `a2perf circuit render` draws with its default size; hard macros not placed yet are not
+//! drawn, so for a finished placement the two are identical).
 
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
 use a2perf_core::{
-    Action, Env, EnvEntry, EnvError, EnvSpec, Observation, ParamKind, ParamSpec, Params, Registry,
-    Space, Step, TaskRef, Tensor, Value,
+    Action, Env, EnvEntry, EnvError, EnvSpec, Frame, Observation, ParamKind, ParamSpec, Params,
+    Registry, Space, Step, TaskRef, Tensor, Value,
 };
 
 use crate::cost::{CostSettings, CostWeights, PlacementCost};
@@ -63,6 +70,7 @@ use crate::generator::{GeneratorConfig, generate};
 use crate::netlist::{Netlist, NodeKind, SoftMacroRule};
 use crate::placer::{FdSchedule, FdScratch, place_std_cells};
 use crate::plc::{Placement, parse_header};
+use crate::render::{RGB_SIZE, SVG_SIZE, render_rgb, render_svg};
 
 /// Default reward when a macro has no legal cell left: circuit_training's current value, below
 /// the proxy cost of any realistic feasible placement.
@@ -843,6 +851,31 @@ impl Env for CircuitEnv {
             }
         }
         Ok(())
+    }
+
+    fn render_modes(&self) -> &'static [&'static str] {
+        &["rgb_array", "svg"]
+    }
+
+    /// `"rgb_array"`: [`render_rgb`] of the current placement; `"svg"`: [`render_svg`] of it,
+    /// titled with the netlist's name (see the module documentation).
+    fn render(&mut self, mode: &str) -> Result<Frame, EnvError> {
+        match mode {
+            "rgb_array" => Ok(render_rgb(&mut self.cost, RGB_SIZE)),
+            "svg" => {
+                let title = self
+                    .spec
+                    .metadata
+                    .get("netlist")
+                    .cloned()
+                    .unwrap_or_default();
+                Ok(Frame::Text(render_svg(&mut self.cost, &title, SVG_SIZE)))
+            }
+            other => Err(EnvError::unsupported_render_mode(
+                other,
+                self.render_modes(),
+            )),
+        }
     }
 }
 

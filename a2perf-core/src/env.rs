@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::render::Frame;
 use crate::space::{Action, Observation, Space};
 
 /// Static description of an environment.
@@ -110,6 +111,37 @@ pub enum EnvError {
     Backend(String),
 }
 
+impl EnvError {
+    /// The error of [`Env::render`] for a mode the environment does not draw: an
+    /// [`EnvError::InvalidParameter`] named `render_mode` that lists the `supported` modes.
+    ///
+    /// ```
+    /// use a2perf_core::EnvError;
+    /// let e = EnvError::unsupported_render_mode("human", &["rgb_array", "svg"]);
+    /// assert_eq!(
+    ///     e.to_string(),
+    ///     "invalid parameter `render_mode`: `human` is not supported (supported modes: \
+    ///      rgb_array, svg)"
+    /// );
+    /// let e = EnvError::unsupported_render_mode("rgb_array", &[]);
+    /// assert!(e.to_string().contains("no render modes"));
+    /// ```
+    pub fn unsupported_render_mode(mode: &str, supported: &[&str]) -> Self {
+        let reason = if supported.is_empty() {
+            format!("`{mode}` is not supported (this environment has no render modes)")
+        } else {
+            format!(
+                "`{mode}` is not supported (supported modes: {})",
+                supported.join(", ")
+            )
+        };
+        Self::InvalidParameter {
+            name: "render_mode".into(),
+            reason,
+        }
+    }
+}
+
 /// A reinforcement-learning environment.
 ///
 /// Implementors provide the allocation-free [`reset_into`](Env::reset_into) and
@@ -189,6 +221,62 @@ pub trait Env: Send {
     fn close(&mut self) -> Result<(), EnvError> {
         Ok(())
     }
+
+    /// The modes [`render`](Env::render) accepts (Gymnasium's `metadata["render_modes"]`):
+    /// `"rgb_array"` for [`Frame::Rgb`], others (`"svg"`, `"html"`) for [`Frame::Text`]. None by
+    /// default.
+    fn render_modes(&self) -> &'static [&'static str] {
+        &[]
+    }
+
+    /// Draws the current state in `mode`, one of [`render_modes`](Env::render_modes). Computed
+    /// only when called: environments do no rendering work in `step`.
+    ///
+    /// The default supports no mode and returns
+    /// [`EnvError::unsupported_render_mode`]; implementations return it for modes they do not
+    /// support too.
+    ///
+    /// ```
+    /// use a2perf_core::{Action, Env, EnvError, EnvSpec, Observation, Space, Step};
+    /// use a2perf_core::render::Frame;
+    ///
+    /// struct Dot { spec: EnvSpec, x: usize }
+    /// impl Env for Dot {
+    ///     fn spec(&self) -> &EnvSpec { &self.spec }
+    ///     fn reset_into(&mut self, _: Option<u64>, obs: &mut Observation) -> Result<(), EnvError> {
+    ///         self.x = 0;
+    ///         *obs = Observation::flat(vec![0.0]);
+    ///         Ok(())
+    ///     }
+    ///     fn step_into(&mut self, _: &Action, out: &mut Step) -> Result<(), EnvError> {
+    ///         self.x += 1;
+    ///         out.observation = Observation::flat(vec![self.x as f32]);
+    ///         Ok(())
+    ///     }
+    ///     fn render_modes(&self) -> &'static [&'static str] { &["ansi"] }
+    ///     fn render(&mut self, mode: &str) -> Result<Frame, EnvError> {
+    ///         match mode {
+    ///             "ansi" => Ok(Frame::Text(format!("{}*", " ".repeat(self.x)))),
+    ///             other => Err(EnvError::unsupported_render_mode(other, self.render_modes())),
+    ///         }
+    ///     }
+    /// }
+    /// let spec = EnvSpec {
+    ///     id: "Dot-v0".into(),
+    ///     observation_space: Space::uniform_box(&[1], 0.0, 9.0),
+    ///     action_space: Space::Discrete { n: 1 },
+    ///     max_episode_steps: None,
+    ///     metadata: Default::default(),
+    /// };
+    /// let mut env: Box<dyn Env> = Box::new(Dot { spec, x: 0 });
+    /// env.reset(Some(0)).unwrap();
+    /// env.step(&Action::Discrete(0)).unwrap();
+    /// assert_eq!(env.render("ansi").unwrap(), Frame::Text(" *".into()));
+    /// assert!(matches!(env.render("rgb_array"), Err(EnvError::InvalidParameter { .. })));
+    /// ```
+    fn render(&mut self, mode: &str) -> Result<Frame, EnvError> {
+        Err(EnvError::unsupported_render_mode(mode, self.render_modes()))
+    }
 }
 
 impl<E: Env + ?Sized> Env for Box<E> {
@@ -203,5 +291,11 @@ impl<E: Env + ?Sized> Env for Box<E> {
     }
     fn close(&mut self) -> Result<(), EnvError> {
         (**self).close()
+    }
+    fn render_modes(&self) -> &'static [&'static str] {
+        (**self).render_modes()
+    }
+    fn render(&mut self, mode: &str) -> Result<Frame, EnvError> {
+        (**self).render(mode)
     }
 }

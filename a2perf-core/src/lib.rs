@@ -3,7 +3,8 @@
 //! The traits and plumbing of the A2Perf benchmark, with no domain knowledge:
 //!
 //! - [`Env`] / [`EnvSpec`] / [`Step`]: environments with Gymnasium semantics, stepped in place
-//!   without allocation; [`VecEnv`] steps many of them over the machine's cores.
+//!   without allocation; [`VecEnv`] steps many of them over the machine's cores; [`render`]:
+//!   the [`Frame`]s of [`Env::render`] and the small rasterizer that draws them.
 //! - [`Space`], [`Observation`], [`Action`]: discrete (with action masks), box and dict spaces.
 //! - [`Policy`], [`Algorithm`], [`TrainingContext`]: how algorithms train and report their curves
 //!   and checkpoints; [`rollout()`](crate::rollout::rollout) runs one episode.
@@ -38,6 +39,7 @@ pub mod env;
 pub mod meter;
 pub mod policy;
 pub mod registry;
+pub mod render;
 pub mod results;
 pub mod resume;
 pub mod rng;
@@ -58,6 +60,7 @@ pub use registry::{
     AlgorithmConstructor, AlgorithmEntry, EnvConstructor, EnvEntry, Registry, RegistryError,
     TaskRef,
 };
+pub use render::Frame;
 pub use results::{RunDir, RunState, RunStatus, write_atomic, write_json_atomic};
 pub use resume::{NewestResume, ResumeDir, ResumePoint, ResumeWrite, TrainingProgress};
 pub use rng::{RngState, RngStream};

@@ -8,6 +8,9 @@
 //! quaternion `heading⁻¹ ⊗ q_ref` in the URDF-base convention (x, y, z, w; w ≥ 0), 12 URDF
 //! joint angles).
 //!
+//! Rendering: [`Env::render`] with `"rgb_array"` draws a 320×240 side view of the robot and the
+//! reference pose ([`crate::render::side_view`]), only when called.
+//!
 //! Action: `Box(−2π, 2π, [12])`, **offsets around the default motor pose** (as the reference's
 //! `LaikagoPoseOffsetGenerator`): the PD target is `[0, 0.67, −1.25]×4 + a` in motor space. Actions
 //! are not residuals around the reference pose. Out-of-box values are clipped (the original's
@@ -17,7 +20,9 @@ use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::Path;
 
-use a2perf_core::{Action, Env, EnvError, EnvSpec, Observation, RngStream, Space, Step, Tensor};
+use a2perf_core::{
+    Action, Env, EnvError, EnvSpec, Frame, Observation, RngStream, Space, Step, Tensor,
+};
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::filter::ActionFilter;
@@ -26,6 +31,7 @@ use crate::model::{NUM_LEGS, NUM_MOTORS, RobotModel};
 use crate::motion::{
     MotionClip, MotionFrame, MotionVelocity, ReferenceMotion, heading_of, yaw_rotation,
 };
+use crate::render::{side_view, state_points};
 use crate::sim::{RobotState, SimConfig, Simulation};
 
 /// Observation size.
@@ -791,5 +797,22 @@ impl Env for LocomotionEnv {
         out.info.set("reward_root_velocity", terms.root_velocity);
         out.info.set("reference_time", t);
         Ok(())
+    }
+
+    fn render_modes(&self) -> &'static [&'static str] {
+        &["rgb_array"]
+    }
+
+    /// `"rgb_array"`: [`side_view`] of the robot and the reference pose now, the camera on the
+    /// robot's base (computed only here; stepping does no rendering work).
+    fn render(&mut self, mode: &str) -> Result<Frame, EnvError> {
+        if mode != "rgb_array" {
+            return Err(EnvError::unsupported_render_mode(mode, self.render_modes()));
+        }
+        let model = self.sim.model();
+        let state = self.sim.state();
+        let robot = state_points(model, &state);
+        let reference = state_points(model, &self.reference_state(self.reference_time()));
+        Ok(side_view(&robot, &reference, state.base_pos.x))
     }
 }

@@ -22,7 +22,8 @@
 //!
 //! Deliberately not included: the original's mocap clips (CC BY-NC; load them with
 //! `motion_file`), mesh collision shapes (simplified boxes, spheres and capsules are used),
-//! rendering beyond the CLI's HTML export, and PyBullet's exact contact model (rapier's
+//! rendering beyond the CLI's HTML export and the environment's stick-figure side view
+//! ([`render::side_view`]), and PyBullet's exact contact model (rapier's
 //! soft-constraint contacts stand in for Bullet's).
 #![warn(missing_docs)]
 

@@ -1,9 +1,16 @@
 //! The web-navigation environment (`WebNavigation-Difficulty-0N-v0`).
+//!
+//! Rendering: [`Env::render`] with `"html"` returns the current page as a standalone HTML
+//! document ([`Website::state_html`] of the episode's website and DOM state), with either
+//! backend: under Chromium the state is the one the browser reported after the last step, so
+//! rendering costs no browser round trip.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use a2perf_core::{Action, Env, EnvError, EnvSpec, Observation, RngStream, Space, Step, Tensor};
+use a2perf_core::{
+    Action, Env, EnvError, EnvSpec, Frame, Observation, RngStream, Space, Step, Tensor,
+};
 
 use crate::chromium::{ChromiumBackend, ChromiumOptions};
 use crate::design::{Design, load_designs};
@@ -806,6 +813,19 @@ impl Env for WebNavEnv {
         self.chrome = None;
         Ok(())
     }
+
+    fn render_modes(&self) -> &'static [&'static str] {
+        &["html"]
+    }
+
+    /// `"html"`: the current page ([`Website::state_html`]); before the first reset, the first
+    /// website of the pool as it starts.
+    fn render(&mut self, mode: &str) -> Result<Frame, EnvError> {
+        if mode != "html" {
+            return Err(EnvError::unsupported_render_mode(mode, self.render_modes()));
+        }
+        Ok(Frame::Text(self.site.state_html(&self.state)))
+    }
 }
 
 impl WebNavEnv {
@@ -991,5 +1011,111 @@ impl WebNavEnv {
                 self.pool_index as f64,
             ],
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use a2perf_core::{Action, Env, EnvError, Frame, Observation, Step};
+
+    use super::*;
+
+    fn html(env: &mut WebNavEnv) -> String {
+        match env.render("html").unwrap() {
+            Frame::Text(t) => t,
+            Frame::Rgb { .. } => panic!("html is text"),
+        }
+    }
+
+    /// An episode of oracle actions (with a random legal click every third step) from `seed`;
+    /// the page after the reset and after every step.
+    fn pages(difficulty: u8, seed: u64) -> Vec<String> {
+        let mut env = WebNavEnv::new(WebNavConfig::new(difficulty)).unwrap();
+        let mut obs = Observation::default();
+        env.reset_into(Some(seed), &mut obs).unwrap();
+        let mut out = vec![html(&mut env)];
+        let mut step = Step::default();
+        let mut rng = RngStream::new(seed, "test/render");
+        for t in 0..STEP_LIMIT {
+            let mask = obs.action_mask.clone().unwrap();
+            let a = match env.oracle_action() {
+                Some(a) if t % 3 != 2 => a,
+                _ => {
+                    let clicks: Vec<usize> =
+                        (0..mask.len()).step_by(2).filter(|&i| mask[i]).collect();
+                    clicks[rng.index(clicks.len())]
+                }
+            };
+            env.step_into(&Action::Discrete(a), &mut step).unwrap();
+            out.push(html(&mut env));
+            if step.done() {
+                break;
+            }
+            obs.copy_from(&step.observation);
+        }
+        out
+    }
+
+    #[test]
+    fn the_page_starts_as_the_website_and_follows_the_episode() {
+        let mut env = WebNavEnv::new(WebNavConfig::new(2)).unwrap();
+        // Before any reset: the first website of the pool as it starts.
+        assert!(html(&mut env).starts_with("<!DOCTYPE html>"));
+        let mut obs = Observation::default();
+        for seed in 0..10 {
+            env.reset_into(Some(seed), &mut obs).unwrap();
+            assert_eq!(html(&mut env), env.website().to_html(false), "seed {seed}");
+        }
+        let mut changed = 0;
+        for seed in 0..6 {
+            let p = pages(1 + (seed % 3) as u8, seed);
+            assert_eq!(p, pages(1 + (seed % 3) as u8, seed), "deterministic");
+            changed += p.windows(2).filter(|w| w[0] != w[1]).count();
+            assert!(
+                p.iter().skip(1).any(|h| h.contains("visited")),
+                "seed {seed}"
+            );
+        }
+        assert!(changed > 10);
+    }
+
+    #[test]
+    fn a_state_read_back_from_chromium_renders_the_same() {
+        // Chromium reports what is displayed (`visible`) but not the own `display: none` flags,
+        // which stay as the reset left them, nor the `visited` class of elements that are not
+        // displayed and not controls, which stays as last seen: the page depends on neither.
+        let mut differed = 0;
+        for seed in 0..20 {
+            let mut env = WebNavEnv::new(WebNavConfig::new(3)).unwrap();
+            let mut obs = Observation::default();
+            env.reset_into(Some(seed), &mut obs).unwrap();
+            let initial_hidden = env.dom().hidden.clone();
+            let mut step = Step::default();
+            while let Some(a) = env.oracle_action() {
+                env.step_into(&Action::Discrete(a), &mut step).unwrap();
+                let mut reported = env.dom().clone();
+                reported.hidden.clone_from(&initial_hidden);
+                for (i, n) in env.website().nodes.iter().enumerate() {
+                    if !reported.visible[i] && !n.tag.is_control() {
+                        reported.visited[i] = !reported.visited[i];
+                    }
+                }
+                differed += usize::from(reported.hidden != env.dom().hidden);
+                assert_eq!(env.website().state_html(&reported), html(&mut env));
+                if step.done() {
+                    break;
+                }
+            }
+        }
+        assert!(differed > 0, "no page turned: the test tests nothing");
+    }
+
+    #[test]
+    fn unknown_modes_name_the_supported_one() {
+        let mut env = WebNavEnv::new(WebNavConfig::new(1)).unwrap();
+        assert_eq!(env.render_modes(), &["html"]);
+        let err = env.render("rgb_array").unwrap_err();
+        assert!(matches!(err, EnvError::InvalidParameter { .. }));
+        assert!(err.to_string().contains("supported modes: html"), "{err}");
     }
 }

@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 use a2perf_core::RngStream;
 
 use crate::design::Design;
-use crate::dom::Quirks;
+use crate::dom::{DomState, Quirks};
 use crate::primitives::{Primitive, ProfileValue};
 use crate::vocab::Vocabulary;
 
@@ -1016,6 +1016,45 @@ impl Website {
 
     /// The elements of the website (the content of `#a2p-root`).
     pub fn root_html(&self, show_all: bool) -> String {
+        self.elements_html(show_all, None)
+    }
+
+    /// The page as it stands in `state`, as a standalone HTML document (what the web
+    /// environment's `"html"` render mode returns): [`to_html`](Self::to_html)`(false)` with
+    /// the state's dynamic part written into the elements — which are displayed (the current
+    /// page, opened menus), the `visited` class, `checked` toggles, the `value` of text inputs,
+    /// the `selected` option of selects and `autofocus` on the focused element.
+    ///
+    /// The page is what is displayed, so that both backends render the same state the same:
+    /// an element's own `display: none` follows `state.visible` where its parent is displayed
+    /// (Chromium reports what is displayed, not the flags), and inside a part that is not
+    /// displayed elements keep their initial flag and show `visited` only if they are controls
+    /// (whose state the browser always reports). A state of another website (too short) renders
+    /// the missing part as initially.
+    ///
+    /// ```
+    /// use a2perf_core::RngStream;
+    /// use a2perf_web::site::Tag;
+    /// use a2perf_web::{ActionKind, Design, DomState, Primitive, Quirks, Vocabulary, Website};
+    /// let p = |n| Primitive::from_name(n).unwrap();
+    /// let d = Design { pages: vec![vec![p("username"), p("rememberme")]] };
+    /// let site = Website::build(&d, &mut RngStream::new(0, "doc"), Vocabulary::standard());
+    /// let mut state = DomState::default();
+    /// state.reset(&site);
+    /// assert_eq!(site.state_html(&state), site.to_html(false));
+    /// let check = site.nodes.iter().position(|n| n.tag == Tag::InputCheckbox).unwrap();
+    /// state.apply(&site, check, ActionKind::Click, Quirks::default());
+    /// let html = site.state_html(&state);
+    /// assert!(html.contains(" checked") && html.contains(" autofocus"));
+    /// ```
+    pub fn state_html(&self, state: &DomState) -> String {
+        shell_html(
+            &self.profile_text(),
+            &self.elements_html(false, Some(state)),
+        )
+    }
+
+    fn elements_html(&self, show_all: bool, state: Option<&DomState>) -> String {
         let mut h = String::with_capacity(self.nodes.len() * 160);
         let mut stack: Vec<u32> = Vec::new();
         for (i, n) in self.nodes.iter().enumerate() {
@@ -1027,13 +1066,22 @@ impl Website {
                     break;
                 }
             }
-            self.open_tag(&mut h, i, show_all);
+            let dynamic = state.map(|st| ElementState::of(st, i, stack.last(), n));
+            self.open_tag(&mut h, i, show_all, dynamic.as_ref());
             match n.block {
                 Block::Container => stack.push(i as u32),
                 Block::Leaf(_) => {
                     if n.tag == Tag::Select {
+                        // The first option is selected by default; another chosen is marked.
+                        let chosen = dynamic.as_ref().map(|d| d.value);
+                        let mut selected = n.options.first().copied() == chosen;
                         for &o in &n.options {
-                            h.push_str("<option>");
+                            if !selected && chosen == Some(o) {
+                                selected = true;
+                                h.push_str("<option selected>");
+                            } else {
+                                h.push_str("<option>");
+                            }
                             escape_into(&mut h, &self.strings[o as usize]);
                             h.push_str("</option>");
                         }
@@ -1052,7 +1100,7 @@ impl Website {
         h
     }
 
-    fn open_tag(&self, h: &mut String, i: usize, show_all: bool) {
+    fn open_tag(&self, h: &mut String, i: usize, show_all: bool, state: Option<&ElementState>) {
         let n = &self.nodes[i];
         let b = match n.block {
             Block::Container => "c".to_string(),
@@ -1067,15 +1115,21 @@ impl Website {
             escape_into(h, &n.html_id);
             h.push('"');
         }
-        let hidden = n.hidden && !(show_all && self.pages.contains(&(i as u32)));
-        if !n.classes.is_empty() || hidden {
+        let hidden = match state {
+            Some(st) => st.hidden,
+            None => n.hidden && !(show_all && self.pages.contains(&(i as u32))),
+        };
+        let visited = state.is_some_and(|st| st.visited);
+        if !n.classes.is_empty() || hidden || visited {
             h.push_str(" class=\"");
             escape_into(h, &n.classes);
-            if hidden {
-                if !n.classes.is_empty() {
-                    h.push(' ');
+            for (on, class) in [(visited, "visited"), (hidden, "a2p-hidden")] {
+                if on {
+                    if !h.ends_with('"') {
+                        h.push(' ');
+                    }
+                    h.push_str(class);
                 }
-                h.push_str("a2p-hidden");
             }
             h.push('"');
         }
@@ -1111,10 +1165,56 @@ impl Website {
             }
             Behaviour::Inert | Behaviour::Actionable => {}
         }
+        if let Some(st) = state {
+            if n.tag.is_toggle() {
+                if st.checked {
+                    h.push_str(" checked");
+                }
+            } else if n.tag.is_control() && n.tag != Tag::Select && st.value != 0 {
+                h.push_str(" value=\"");
+                escape_into(
+                    h,
+                    self.strings
+                        .get(st.value as usize)
+                        .map_or("", String::as_str),
+                );
+                h.push('"');
+            }
+            if st.focused {
+                h.push_str(" autofocus");
+            }
+        }
         if n.tag == Tag::Img {
             h.push_str(" alt=\"\" src=\"data:image/svg+xml,%3Csvg xmlns='http://www.w3.org/2000/svg' width='8' height='8'%3E%3Crect width='8' height='8' fill='%23bbb'/%3E%3C/svg%3E\"");
         }
         h.push('>');
+    }
+}
+
+/// The dynamic part of one element in a [`DomState`], as [`Website::state_html`] writes it.
+struct ElementState {
+    hidden: bool,
+    visited: bool,
+    checked: bool,
+    value: u32,
+    focused: bool,
+}
+
+impl ElementState {
+    /// Element `i` (node `n`, parent element `parent`) in `st`; what `st` lacks is initial.
+    fn of(st: &DomState, i: usize, parent: Option<&u32>, n: &Node) -> Self {
+        let shown = |j: usize| st.visible.get(j) == Some(&true);
+        let parent_shown = parent.is_none_or(|&p| shown(p as usize));
+        Self {
+            hidden: match st.visible.get(i) {
+                Some(&visible) if parent_shown => !visible,
+                _ => n.hidden,
+            },
+            visited: st.visited.get(i) == Some(&true) && (shown(i) || n.tag.is_control()),
+            checked: st.checked.get(i).copied().unwrap_or(false),
+            value: st.value.get(i).copied().unwrap_or(0),
+            focused: st.focused == Some(i as u32),
+        }
     }
 }
 

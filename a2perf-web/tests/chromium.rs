@@ -193,6 +193,59 @@ fn simulated_and_chromium_backends_agree() {
     real.close().unwrap();
 }
 
+/// The `"html"` render mode gives the same page with either backend, step by step (the
+/// Chromium backend's state is what the browser reported).
+#[test]
+fn html_render_agrees_between_backends() {
+    if !chrome_or_skip() {
+        return;
+    }
+    let pool = pool();
+    let mut sim = WebNavEnv::with_pool(pool.clone(), WebNavConfig::new(1), "render-sim").unwrap();
+    let mut cfg = WebNavConfig::new(1);
+    cfg.backend = BackendKind::Chromium;
+    let mut real = WebNavEnv::with_pool(pool.clone(), cfg, "render-chromium").unwrap();
+    let html = |env: &mut WebNavEnv| match env.render("html").unwrap() {
+        a2perf_core::Frame::Text(t) => t,
+        a2perf_core::Frame::Rgb { .. } => panic!("html is text"),
+    };
+    let (mut so, mut ro) = (Observation::default(), Observation::default());
+    let (mut ss, mut rs) = (Step::default(), Step::default());
+    let mut compared = 0;
+    for ep in 0..pool.len().min(24) {
+        sim.reset_to_website(ep, ep as u64, &mut so).unwrap();
+        real.reset_to_website(ep, ep as u64, &mut ro).unwrap();
+        assert_eq!(html(&mut sim), html(&mut real), "episode {ep} reset");
+        let mut rng = RngStream::new(ep as u64, "render-actions");
+        for t in 0..30 {
+            let a = match sim.oracle_action() {
+                Some(a) if t % 4 != 3 => a,
+                _ => pick_action(&so, &mut rng),
+            };
+            step_both(
+                &mut sim,
+                &mut real,
+                a,
+                &mut ss,
+                &mut rs,
+                &format!("episode {ep}"),
+            );
+            assert_eq!(
+                html(&mut sim),
+                html(&mut real),
+                "episode {ep} step {t} action {a}"
+            );
+            compared += 1;
+            so.copy_from(&ss.observation);
+            if ss.done() {
+                break;
+            }
+        }
+    }
+    assert!(compared > 50);
+    real.close().unwrap();
+}
+
 /// The original's semantics (A2Perf's `visitGroup`, the `cc` bug, empty placeholders, the
 /// step limit as termination) agree step by step in both backends: values set and cleared,
 /// checkboxes toggled, radios checked (or, for `cc`, never), ids shared by buttons, stale steps;

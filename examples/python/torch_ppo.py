@@ -3,11 +3,13 @@
 Trains on ``QuadrupedLocomotion-DogPace-v0`` with ``run.make_vec`` (N environments stepped in
 Rust threads, seeded from the run's seed), logs the built-in evaluation protocol's curve and
 checkpoints with ``a2perf_rs.TrainingRun``, then infers and generalizes the greedy policy. It is
-documented but not run in CI (it needs PyTorch, which the tests do not install); CI only checks
-that it compiles. Run from the repository root::
+not run in CI (it needs PyTorch, which the tests do not install); CI only checks that it
+compiles. Run from the repository root (the second command trains the built-in PPO to compare
+with)::
 
     pip install ./python torch
     python examples/python/torch_ppo.py --out results/torch_ppo --total-steps 200000
+    cargo run --release -p a2perf-cli -- run configs/quadruped_locomotion/ppo.ron --seeds 0 -o results/locomotion_ppo
     cargo run --release -p a2perf-cli -- report results/torch_ppo results/locomotion_ppo -o results/torch-vs-ppo
 
 Vector-environment semantics are Gymnasium 1.x's next-step autoreset: after an episode ends,

@@ -28,6 +28,24 @@ steps, which every environment overwrites completely (tested for every id).
 mask forbids is not applied: by default (``illegal_action="terminate"``) the episode terminates
 with ``illegal_action_reward`` (default: the circuit's ``infeasible_reward``, else -1) and
 ``info["illegal_action"] = True``; with ``illegal_action="raise"`` it raises ``ValueError``.
+
+**Rendering.** ``gym.make(id, render_mode=...)`` takes one of the id's render modes
+(``env.metadata["render_modes"]``), and :meth:`A2PerfEnv.render` then returns the current state
+drawn by the Rust environment, computed only when called:
+
+- circuit placement: ``"rgb_array"``, the placement rasterized to a ``uint8`` array
+  ``(H, W, 3)``, 400 pixels on the canvas's longer side (white canvas, congestion heatmap, soft
+  macros, placed hard macros, ports), and ``"svg"``, a ``str``: the picture
+  ``a2perf circuit render`` draws (800 pixels) with the macros placed so far, for a finished
+  placement exactly the CLI's output;
+- locomotion: ``"rgb_array"``, a ``(240, 320, 3)`` side view (x–z plane, camera following the
+  robot's base) of the robot's stick figure (red) over the reference pose (green) and the ground;
+- web navigation: ``"html"``, a ``str``: the current page as a standalone HTML document (which
+  page is shown, values typed, boxes checked, ``visited`` classes), with either backend.
+
+``render_mode=None`` (the default) renders nothing and ``render()`` returns ``None``; a mode the
+id does not have raises ``ValueError`` naming the ones it has. ``metadata["render_fps"]`` is
+1000/33 for locomotion (a frame per 33 ms control step) and 4 for the others (a watchable pace).
 """
 
 from __future__ import annotations
@@ -46,14 +64,44 @@ NAMESPACE = "a2perf"
 # Keyword arguments handled by the Python bindings rather than by the environment itself.
 BINDING_KWARGS = ("illegal_action", "illegal_action_reward")
 
+# Render modes and frame rates of each domain's ids: what `gymnasium.make` checks `render_mode`
+# against before building anything. The Rust environments' own `render_modes()` are the
+# authority (test_render.py checks every id agrees).
+RENDER_METADATA: dict[str, dict[str, Any]] = {
+    "circuit_training": {"render_modes": ["rgb_array", "svg"], "render_fps": 4},
+    # One frame per control step of 33 ms.
+    "quadruped_locomotion": {"render_modes": ["rgb_array"], "render_fps": 1000 / 33},
+    "web_navigation": {"render_modes": ["html"], "render_fps": 4},
+}
+
+
+def _domain(env_id: str) -> str | None:
+    """The domain of ``env_id`` (without namespace), ``None`` for an unknown id."""
+    for entry_id, domain, _summary, _params in _native.env_entries():
+        if entry_id == env_id:
+            return str(domain)
+    return None
+
+
+def render_metadata(env_id: str) -> dict[str, Any]:
+    """``{"render_modes": [...], "render_fps": ...}`` of ``env_id`` (with or without the
+    ``a2perf/`` namespace): Gymnasium's ``metadata`` of its environments."""
+    bare = env_id.split("/", 1)[1] if env_id.startswith(NAMESPACE + "/") else env_id
+    domain = _domain(bare)
+    if domain is None:
+        raise gym.error.UnregisteredEnv(f"no a2perf environment {env_id!r}")
+    meta = RENDER_METADATA.get(domain, {"render_modes": [], "render_fps": None})
+    return {"render_modes": list(meta["render_modes"]), "render_fps": meta["render_fps"]}
+
 
 class A2PerfEnv(gym.Env[Any, Any]):
     """One environment of the benchmark, stepped in Rust.
 
     Args:
         env_id: The benchmark id, e.g. ``"QuadrupedLocomotion-DogPace-v0"`` (without namespace).
-        render_mode: Must be ``None``: the benchmark's renderers are offline pictures
-            (``a2perf circuit render``, ``a2perf locomotion render``), not frames.
+        render_mode: ``None`` (default: nothing is rendered) or one of the id's render modes
+            (``metadata["render_modes"]``; see the module documentation), which
+            :meth:`render` then draws. Any other value raises ``ValueError`` naming the modes.
         illegal_action: ``"terminate"`` (default) or ``"raise"``, see the module documentation.
         illegal_action_reward: Reward of an illegal action under ``"terminate"``.
         episode_seeds: ``(run_seed, index)``: every ``reset()`` without a seed takes the next
@@ -61,6 +109,9 @@ class A2PerfEnv(gym.Env[Any, Any]):
             algorithms' training environments do (what :meth:`a2perf_rs.TrainingRun.make_env`
             gives). ``None`` (default): the environment continues its own random stream.
         **params: The environment's parameters.
+
+    ``metadata`` is the id's (an instance attribute): ``{"render_modes": [...], "render_fps":
+    ...}``.
     """
 
     metadata: dict[str, Any] = {"render_modes": []}
@@ -74,11 +125,10 @@ class A2PerfEnv(gym.Env[Any, Any]):
         episode_seeds: tuple[int, int] | None = None,
         **params: Any,
     ) -> None:
-        if render_mode is not None:
-            raise ValueError(
-                f"render_mode={render_mode!r} is not supported: {env_id} has no frame renderer"
-            )
-        self.render_mode = None
+        domain = _domain(env_id)
+        if render_mode is not None and domain is not None:
+            # Checked before building: a bad argument must not start a browser first.
+            _check_render_mode(env_id, render_mode, render_metadata(env_id)["render_modes"])
         self._native = _native.Env(
             env_id,
             params,
@@ -86,6 +136,18 @@ class A2PerfEnv(gym.Env[Any, Any]):
             illegal_action_reward=illegal_action_reward,
             episode_seeds=episode_seeds,
         )
+        modes = list(self._native.render_modes())
+        if render_mode is not None:
+            try:
+                _check_render_mode(env_id, render_mode, modes)
+            except ValueError:
+                self._native.close()
+                raise
+        self.metadata = {
+            "render_modes": modes,
+            "render_fps": RENDER_METADATA.get(domain or "", {}).get("render_fps"),
+        }
+        self.render_mode = render_mode
         spec = self._native.spec()
         self.env_id = env_id
         self.observation_space = to_gymnasium(spec["observation_space"])
@@ -106,6 +168,14 @@ class A2PerfEnv(gym.Env[Any, Any]):
         """Applies ``action``; returns ``(observation, reward, terminated, truncated, info)``."""
         return self._native.step(action)
 
+    def render(self) -> np.ndarray | str | None:
+        """The current state drawn in ``render_mode``: a ``uint8`` array ``(H, W, 3)`` for
+        ``"rgb_array"``, a ``str`` for ``"svg"`` and ``"html"``; ``None`` when ``render_mode`` is
+        ``None``. Each call draws anew (a fresh array); same seed and actions, same frames."""
+        if self.render_mode is None:
+            return None
+        return self._native.render(self.render_mode)
+
     def action_masks(self) -> np.ndarray | None:
         """The legal actions of the current state as a boolean array (``None`` when the action
         space is continuous)."""
@@ -121,6 +191,30 @@ class A2PerfEnv(gym.Env[Any, Any]):
 
     def __repr__(self) -> str:
         return f"A2PerfEnv({self.env_id!r})"
+
+
+def _check_render_mode(env_id: str, render_mode: str, modes: list[str]) -> None:
+    if render_mode not in modes:
+        supported = ", ".join(repr(m) for m in modes) if modes else "none"
+        raise ValueError(
+            f"render_mode={render_mode!r} is not supported by {env_id}: its render modes are "
+            f"{supported} (or None for no rendering)"
+        )
+
+
+class _EnvCreator:
+    """The Gymnasium entry point of one id: builds an :class:`A2PerfEnv`, and carries the id's
+    ``metadata``, which ``gymnasium.make`` reads to check ``render_mode`` (and to offer the
+    ``"<mode>_list"`` and ``"human"`` wrappers)."""
+
+    def __init__(self, metadata: dict[str, Any]) -> None:
+        self.metadata = metadata
+
+    def __call__(self, **kwargs: Any) -> A2PerfEnv:
+        return A2PerfEnv(**kwargs)
+
+    def __repr__(self) -> str:
+        return f"{__name__}.A2PerfEnv"
 
 
 def env_params(env_id: str) -> list[tuple[str, str, list[str], Any, str]]:
@@ -146,7 +240,7 @@ def register_all() -> None:
             continue
         gym.register(
             id=full,
-            entry_point=A2PerfEnv,
+            entry_point=_EnvCreator(render_metadata(entry_id)),
             vector_entry_point=A2PerfVectorEnv,
             kwargs={"env_id": entry_id},
             # Episode limits depend on parameters (web `step_limit`, circuit macros, locomotion

@@ -12,7 +12,12 @@ Inputs use the column names of the CLI's CSV files, so a report's ``curves.csv``
 
 Run ids are kept in order of first appearance, steps are sorted per run and a step given twice
 for one run is an error, exactly as ``a2perf metrics`` reads its CSV files. Errors name the table
-and its row (rows count from 0).
+and its row (rows count from 0), e.g. ``scores:3: column 'score': 'abc' is not a number``.
+
+A scores array gives the statistics of its one algorithm; a scores DataFrame is grouped per
+algorithm (see :func:`group_scores`) and gives a ``pandas.DataFrame`` with one row per algorithm
+(per algorithm and threshold for :func:`performance_profile`, per ordered pair of algorithms for
+:func:`probability_of_improvement`), each computed exactly as on that algorithm's array.
 
 Example::
 
@@ -68,15 +73,48 @@ def _floats(x: Any, what: str) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
+def _frame_floats(frame: Any, name: str, table: str, columns: tuple[str, ...]) -> np.ndarray:
+    """A numeric column of a frame as float64; text that reads as a number (a column that
+    ``read_csv`` left as strings) is accepted, anything else is an error naming its row."""
+    arr = np.asarray(_column(frame, name, table, columns))
+    if arr.dtype.kind in "fiu":
+        return np.ascontiguousarray(arr, dtype=np.float64)
+    out = np.empty(arr.shape[0], dtype=np.float64)
+    for i, v in enumerate(arr):
+        try:
+            if isinstance(v, (bool, np.bool_)):
+                raise TypeError
+            out[i] = float(v)
+        except (TypeError, ValueError):
+            raise ValueError(f"{table}:{i}: column {name!r}: {v!r} is not a number") from None
+    return out
+
+
+def _frame_labels(frame: Any, name: str, table: str, columns: tuple[str, ...]) -> list[str]:
+    """An id column of a frame as strings; a missing value (None, NaN, NA) is an error naming
+    its row."""
+    out: list[str] = []
+    for i, v in enumerate(_column(frame, name, table, columns)):
+        if not isinstance(v, str):
+            try:
+                missing = v is None or bool(v != v)
+            except (TypeError, ValueError):  # pandas.NA
+                missing = True
+            if missing:
+                raise ValueError(f"{table}:{i}: column {name!r} has no value ({v!r})")
+        out.append(str(v))
+    return out
+
+
 def curve_records(
     curves: Any, steps: Any = None
 ) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Curves in any accepted form as long-format ``(runs, steps, values)``."""
     if _is_frame(curves):
         cols = ("run", "step", "value")
-        runs = [str(r) for r in _column(curves, "run", "curves", cols)]
-        st = _floats(_column(curves, "step", "curves", cols), "curves: step")
-        va = _floats(_column(curves, "value", "curves", cols), "curves: value")
+        runs = _frame_labels(curves, "run", "curves", cols)
+        st = _frame_floats(curves, "step", "curves", cols)
+        va = _frame_floats(curves, "value", "curves", cols)
         return runs, st, va
     if isinstance(curves, Mapping):
         items = [(str(k), v) for k, v in curves.items()]
@@ -119,8 +157,9 @@ def curve_records(
 
 def _rollouts(rollouts: Any) -> np.ndarray:
     if _is_frame(rollouts):
-        rollouts = _column(rollouts, "return", "rollouts", ("return",))
-    arr = _floats(rollouts, "rollouts")
+        arr = _frame_floats(rollouts, "return", "rollouts", ("return",))
+    else:
+        arr = _floats(rollouts, "rollouts")
     if arr.ndim != 1:
         raise ValueError(f"rollouts must be one-dimensional, got shape {arr.shape}")
     return arr
@@ -366,24 +405,59 @@ def _score_matrix(scores: Any, what: str = "scores") -> np.ndarray:
 
 def group_scores(scores: Any) -> tuple[list[str], dict[str, np.ndarray]]:
     """A scores DataFrame (``algorithm, task, run, score``) as ``(tasks, {algorithm: runs × tasks
-    array})``, grouped as ``a2perf metrics iqm`` groups ``scores.csv``."""
+    array})``, grouped as ``a2perf metrics iqm`` groups ``scores.csv``: algorithms, tasks and runs
+    in order of first appearance. A missing column, an id or score missing or not a number, a
+    score that is not finite, an ``(algorithm, task, run)`` given twice and an algorithm without
+    a score for some task and run are ``ValueError``s naming the column or row."""
     cols = ("algorithm", "task", "run", "score")
-    algos = [str(x) for x in _column(scores, "algorithm", "scores", cols)]
-    tasks = [str(x) for x in _column(scores, "task", "scores", cols)]
-    runs = [str(x) for x in _column(scores, "run", "scores", cols)]
-    values = _floats(_column(scores, "score", "scores", cols), "scores: score")
+    algos = _frame_labels(scores, "algorithm", "scores", cols)
+    tasks = _frame_labels(scores, "task", "scores", cols)
+    runs = _frame_labels(scores, "run", "scores", cols)
+    values = _frame_floats(scores, "score", "scores", cols)
     task_names, groups = _m.group_scores(algos, tasks, runs, values)
     return list(task_names), dict(groups)
 
 
-def iqm(scores: Any) -> float:
-    """Interquartile mean (rliable's 25 % trimmed mean) of a runs × tasks array."""
-    return _m.aggregates(_score_matrix(scores), ["iqm"])[0]
+def _per_algorithm(scores: Any) -> dict[str, np.ndarray] | None:
+    """The runs × tasks array of each algorithm of a scores DataFrame; ``None`` for an array."""
+    return group_scores(scores)[1] if _is_frame(scores) else None
 
 
-def aggregates(scores: Any, names: Sequence[str] = ("median", "iqm", "mean"), gamma: float = 1.0) -> dict[str, float]:
-    """Point aggregates (``iqm``, ``mean``, ``median``, ``optimality_gap`` with ``gamma``)."""
-    return dict(zip(names, _m.aggregates(_score_matrix(scores), list(names), gamma)))
+def _table(rows: list[dict[str, Any]], columns: list[str]) -> Any:
+    import pandas as pd
+
+    return pd.DataFrame(rows, columns=columns)
+
+
+def _size(s: np.ndarray) -> dict[str, int]:
+    return {"runs": s.shape[0], "tasks": s.shape[1]}
+
+
+def iqm(scores: Any) -> Any:
+    """Interquartile mean (rliable's 25 % trimmed mean) of a runs × tasks array, a float.
+
+    A scores DataFrame gives one row per algorithm: ``algorithm, iqm, runs, tasks``."""
+    out = aggregates(scores, ("iqm",))
+    return out if _is_frame(scores) else out["iqm"]
+
+
+def aggregates(
+    scores: Any, names: Sequence[str] = ("median", "iqm", "mean"), gamma: float = 1.0
+) -> Any:
+    """Point aggregates (``iqm``, ``mean``, ``median``, ``optimality_gap`` with ``gamma``) of a
+    runs × tasks array: ``{name: value}``.
+
+    A scores DataFrame gives one row per algorithm: ``algorithm``, one column per name,
+    ``runs, tasks``."""
+    names = list(names)
+    groups = _per_algorithm(scores)
+    if groups is None:
+        return dict(zip(names, _m.aggregates(_score_matrix(scores), names, gamma)))
+    rows = [
+        {"algorithm": algo, **dict(zip(names, _m.aggregates(s, names, gamma))), **_size(s)}
+        for algo, s in groups.items()
+    ]
+    return _table(rows, ["algorithm", *names, "runs", "tasks"])
 
 
 def aggregate_ci(
@@ -395,46 +469,111 @@ def aggregate_ci(
     confidence: float = 0.95,
     gamma: float = 1.0,
     task_bootstrap: bool = False,
-) -> dict[str, tuple[float, float, float]]:
-    """Stratified-bootstrap percentile intervals (rliable's ``get_interval_estimates``):
-    ``{name: (point, lower, upper)}``. Deterministic for a given ``seed``."""
-    point, lower, upper = _m.aggregate_ci(
-        _score_matrix(scores), list(names), gamma, reps, seed, confidence, task_bootstrap
-    )
-    return {n: (float(point[i]), float(lower[i]), float(upper[i])) for i, n in enumerate(names)}
+) -> Any:
+    """Stratified-bootstrap percentile intervals (rliable's ``get_interval_estimates``) of a
+    runs × tasks array: ``{name: (point, lower, upper)}``. Deterministic for a given ``seed``.
+
+    A scores DataFrame gives one row per algorithm, each bootstrapped with the same ``seed`` as
+    ``a2perf metrics iqm`` does: ``algorithm``, then ``<name>, <name>_ci_lower, <name>_ci_upper``
+    per name, then ``runs, tasks``."""
+    names = list(names)
+
+    def one(s: np.ndarray) -> dict[str, tuple[float, float, float]]:
+        point, lower, upper = _m.aggregate_ci(
+            s, names, gamma, reps, seed, confidence, task_bootstrap
+        )
+        return {n: (float(point[i]), float(lower[i]), float(upper[i])) for i, n in enumerate(names)}
+
+    groups = _per_algorithm(scores)
+    if groups is None:
+        return one(_score_matrix(scores))
+    rows = []
+    for algo, s in groups.items():
+        row: dict[str, Any] = {"algorithm": algo}
+        for n, (p, lo, hi) in one(s).items():
+            row.update({n: p, f"{n}_ci_lower": lo, f"{n}_ci_upper": hi})
+        rows.append({**row, **_size(s)})
+    columns = [c for n in names for c in (n, f"{n}_ci_lower", f"{n}_ci_upper")]
+    return _table(rows, ["algorithm", *columns, "runs", "tasks"])
 
 
 def iqm_ci(scores: Any, *, reps: int = 50_000, seed: int = 0, confidence: float = 0.95) -> Any:
     """IQM with its bootstrap interval.
 
     A runs × tasks array gives ``(iqm, lower, upper)``. A DataFrame with the columns of
-    ``scores.csv`` gives one row per algorithm with the columns of ``a2perf metrics iqm --json``:
+    ``scores.csv`` gives one row per algorithm with the columns of ``a2perf metrics iqm --json``
+    (and its numbers for the same ``reps`` and ``seed``):
     ``algorithm, iqm, ci_lower, ci_upper, runs, tasks``.
     """
+    out = aggregate_ci(scores, ("iqm",), reps=reps, seed=seed, confidence=confidence)
     if _is_frame(scores):
-        import pandas as pd
+        return out.rename(columns={"iqm_ci_lower": "ci_lower", "iqm_ci_upper": "ci_upper"})
+    return out["iqm"]
 
-        _, groups = group_scores(scores)
-        rows = []
-        for algo, s in groups.items():
-            p, lo, hi = aggregate_ci(s, ("iqm",), reps=reps, seed=seed, confidence=confidence)["iqm"]
-            rows.append(
-                {"algorithm": algo, "iqm": p, "ci_lower": lo, "ci_upper": hi,
-                 "runs": s.shape[0], "tasks": s.shape[1]}
-            )
-        return pd.DataFrame(rows, columns=["algorithm", "iqm", "ci_lower", "ci_upper", "runs", "tasks"])
-    return aggregate_ci(scores, ("iqm",), reps=reps, seed=seed, confidence=confidence)["iqm"]
+
+def _one_algorithm(frame: Any, what: str) -> tuple[list[str], np.ndarray]:
+    try:
+        tasks, groups = group_scores(frame)
+    except ValueError as e:
+        raise ValueError(f"{what}: {e}") from None
+    if len(groups) != 1:
+        raise ValueError(
+            f"{what}: expected the scores of one algorithm, found {len(groups)} "
+            f"({', '.join(groups)}); pass one DataFrame alone to compare every pair"
+        )
+    return tasks, next(iter(groups.values()))
 
 
 def probability_of_improvement(
-    x: Any, y: Any, *, reps: int = 2000, seed: int = 0, confidence: float = 0.95
-) -> tuple[float, float, float]:
-    """P(X > Y) (Mann–Whitney, averaged over tasks) of two runs × tasks arrays with the same
-    tasks, with an independent stratified-bootstrap interval: ``(point, lower, upper)``
-    (``reps=0``: no interval, NaN bounds)."""
-    return _m.probability_of_improvement(
-        _score_matrix(x, "x"), _score_matrix(y, "y"), reps, seed, confidence
-    )
+    x: Any, y: Any = None, *, reps: int = 2000, seed: int = 0, confidence: float = 0.95
+) -> Any:
+    """P(X > Y) (Mann–Whitney, averaged over tasks) with an independent stratified-bootstrap
+    interval (``reps=0``: no interval, NaN bounds).
+
+    - two runs × tasks arrays with the same tasks (columns): ``(point, lower, upper)``;
+    - two scores DataFrames of one algorithm each, with the same task names (in any order):
+      ``(point, lower, upper)``, equal to the arrays' with the tasks in ``x``'s order;
+    - one scores DataFrame (``y`` omitted) of two or more algorithms: every ordered pair, as the
+      probability-of-improvement table of ``a2perf report`` lists them, in a DataFrame
+      ``x, y, probability, ci_lower, ci_upper, tasks`` (algorithms in order of first appearance,
+      each pair bootstrapped with the same ``seed``).
+    """
+
+    def poi(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
+        return _m.probability_of_improvement(a, b, reps, seed, confidence)
+
+    if y is None:
+        groups = _per_algorithm(x)
+        if groups is None:
+            raise TypeError(
+                "probability_of_improvement: y is required unless x is a scores DataFrame"
+            )
+        if len(groups) < 2:
+            raise ValueError(
+                f"scores: probability of improvement needs two algorithms, found {len(groups)} "
+                f"({', '.join(groups)})"
+            )
+        rows = [
+            {"x": a, "y": b, **dict(zip(("probability", "ci_lower", "ci_upper"), poi(sa, sb))),
+             "tasks": sa.shape[1]}
+            for a, sa in groups.items()
+            for b, sb in groups.items()
+            if a != b
+        ]
+        return _table(rows, ["x", "y", "probability", "ci_lower", "ci_upper", "tasks"])
+    if _is_frame(x) != _is_frame(y):
+        raise TypeError(
+            "probability_of_improvement: x and y must both be arrays or both DataFrames"
+        )
+    if not _is_frame(x):
+        return poi(_score_matrix(x, "x"), _score_matrix(y, "y"))
+    (tx, sx), (ty, sy) = _one_algorithm(x, "x"), _one_algorithm(y, "y")
+    if set(tx) != set(ty) or len(tx) != len(ty):
+        raise ValueError(
+            f"x and y must have the same tasks: only in x: {sorted(set(tx) - set(ty))}, "
+            f"only in y: {sorted(set(ty) - set(tx))}"
+        )
+    return poi(sx, np.ascontiguousarray(sy[:, [ty.index(t) for t in tx]]))
 
 
 def performance_profile(
@@ -445,9 +584,28 @@ def performance_profile(
     reps: int = 2000,
     seed: int = 0,
     confidence: float = 0.95,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> Any:
     """Score distribution at thresholds ``taus`` (fraction of run scores above τ; with
-    ``over_runs=False`` the fraction of task means), with bootstrap intervals:
-    ``(profile, lower, upper)``."""
+    ``over_runs=False`` the fraction of task means), with bootstrap intervals (``reps=0``: none,
+    NaN bounds).
+
+    A runs × tasks array gives ``(profile, lower, upper)``, three arrays of ``len(taus)``. A scores
+    DataFrame gives one row per algorithm and τ, each algorithm bootstrapped with the same
+    ``seed``: ``algorithm, tau, profile, ci_lower, ci_upper``."""
     t = _floats(taus, "taus").ravel().tolist()
-    return _m.performance_profile(_score_matrix(scores), t, over_runs, reps, seed, confidence)
+
+    def one(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return _m.performance_profile(s, t, over_runs, reps, seed, confidence)
+
+    groups = _per_algorithm(scores)
+    if groups is None:
+        return one(_score_matrix(scores))
+    rows = []
+    for algo, s in groups.items():
+        p, lo, hi = one(s)
+        rows += [
+            {"algorithm": algo, "tau": t[i], "profile": float(p[i]),
+             "ci_lower": float(lo[i]), "ci_upper": float(hi[i])}
+            for i in range(len(t))
+        ]
+    return _table(rows, ["algorithm", "tau", "profile", "ci_lower", "ci_upper"])

@@ -17,7 +17,13 @@ Semantics are Gymnasium 1.x's: ``reset(seed=s)`` seeds environment ``i`` with ``
 gives one seed per environment); later resets continue each environment's own random stream; the
 autoreset mode is next-step by default (``autoreset_mode=AutoresetMode.SAME_STEP`` is supported
 too). ``infos`` is a dict of arrays with ``_key`` masks, holding ``action_mask`` (``(N, n)``
-int8) for discrete environments with masks.
+int8) for discrete environments with masks; in same-step mode ``final_obs`` (an object array,
+``None`` where no episode ended) and ``final_info`` (itself such a dict). All of it is what
+Gymnasium's ``SyncVectorEnv`` over N :class:`~a2perf_rs.envs.A2PerfEnv` returns (tested, both
+modes, infos included).
+
+A step that any environment refuses (``step`` before ``reset``, or a masked-out action with
+``illegal_action="raise"``) raises naming that environment and steps none of them.
 """
 
 from __future__ import annotations
@@ -153,6 +159,13 @@ class A2PerfVectorEnv(VectorEnv):
         if self._discrete:
             if actions.dtype.kind not in "iu":
                 raise TypeError(f"discrete actions must be integers, got dtype {actions.dtype}")
+            if actions.dtype.kind == "u" and actions.size and actions.max() > np.iinfo(np.int64).max:
+                # Cast to int64 such a value would wrap around to a negative one.
+                i = int(np.argmax(actions.reshape(-1) > np.iinfo(np.int64).max))
+                raise ValueError(
+                    f"environment {i}: action {actions.reshape(-1)[i]} is outside "
+                    f"Discrete({self.single_action_space.n})"
+                )
             actions = actions.astype(np.int64, copy=False)
         else:
             if actions.dtype.kind not in "fiu":

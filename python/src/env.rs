@@ -9,6 +9,7 @@
 use std::collections::BTreeMap;
 use std::sync::{Mutex, MutexGuard, OnceLock};
 
+use a2perf_core::render::Frame;
 use a2perf_core::{Action, Env, EnvSpec, Observation, Registry, Space, Step, Value};
 use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, npyffi};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -401,6 +402,30 @@ impl ObsRecycler {
     }
 }
 
+/// Why a step is refused with an error (see [`EpisodeCore::refusal`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refusal {
+    /// Before the first reset, or after the episode ended.
+    NeedsReset,
+    /// The mask forbids this action and the policy is [`IllegalAction::Raise`].
+    Masked(usize),
+}
+
+impl Refusal {
+    /// The Python exception, its message prefixed with `context` (e.g. `"environment 1: "`).
+    pub fn into_err(self, context: &str) -> PyErr {
+        match self {
+            Self::NeedsReset => PyRuntimeError::new_err(format!(
+                "{context}step() called before reset() or after the episode ended (terminated \
+                 or truncated): call reset() first"
+            )),
+            Self::Masked(a) => PyValueError::new_err(format!(
+                "{context}action {a} is masked out in this state (info[\"action_mask\"][{a}] == 0)"
+            )),
+        }
+    }
+}
+
 /// One environment with the episode bookkeeping shared by single and vector environments.
 pub struct EpisodeCore {
     /// The environment.
@@ -503,35 +528,44 @@ impl EpisodeCore {
     /// mask forbids (an error, or the terminated outcome in `self.step`). `Ok(true)`: the
     /// environment must now be stepped with [`EpisodeCore::step_env`].
     pub fn admit(&mut self, action: &Action) -> PyResult<bool> {
-        if self.needs_reset {
-            return Err(PyRuntimeError::new_err(
-                "step() called before reset() or after the episode ended (terminated or \
-                 truncated): call reset() first",
-            ));
+        if let Some(refusal) = self.refusal(action) {
+            return Err(refusal.into_err(""));
         }
         self.illegal = false;
-        if let Action::Discrete(a) = action
-            && let Some(mask) = &self.step.observation.action_mask
-            && !mask.get(*a).copied().unwrap_or(false)
+        if let (Some(_), IllegalAction::Terminate(reward)) = (self.masked_out(action), self.policy)
         {
-            match self.policy {
-                IllegalAction::Raise => {
-                    return Err(PyValueError::new_err(format!(
-                        "action {a} is masked out in this state (info[\"action_mask\"][{a}] == 0)"
-                    )));
-                }
-                IllegalAction::Terminate(reward) => {
-                    self.step.reward = reward;
-                    self.step.terminated = true;
-                    self.step.truncated = false;
-                    self.step.info.clear();
-                    self.illegal = true;
-                    self.needs_reset = true;
-                    return Ok(false);
-                }
-            }
+            self.step.reward = reward;
+            self.step.terminated = true;
+            self.step.truncated = false;
+            self.step.info.clear();
+            self.illegal = true;
+            self.needs_reset = true;
+            return Ok(false);
         }
         Ok(true)
+    }
+
+    /// Why [`EpisodeCore::admit`] would refuse `action` with an error, changing nothing: the
+    /// episode needs a reset, or the mask forbids the action under [`IllegalAction::Raise`]. A
+    /// vector environment asks every environment first, so that a refused batch steps none.
+    pub fn refusal(&self, action: &Action) -> Option<Refusal> {
+        if self.needs_reset {
+            return Some(Refusal::NeedsReset);
+        }
+        match (self.masked_out(action), self.policy) {
+            (Some(a), IllegalAction::Raise) => Some(Refusal::Masked(a)),
+            _ => None,
+        }
+    }
+
+    /// The discrete action `action` when the current mask forbids it.
+    fn masked_out(&self, action: &Action) -> Option<usize> {
+        match (action, &self.step.observation.action_mask) {
+            (Action::Discrete(a), Some(mask)) if !mask.get(*a).copied().unwrap_or(false) => {
+                Some(*a)
+            }
+            _ => None,
+        }
     }
 
     /// Steps the environment with an action [`EpisodeCore::admit`] accepted.
@@ -793,6 +827,33 @@ impl PyEnv {
     #[getter]
     fn closed(&self) -> PyResult<bool> {
         Ok(self.core()?.is_none())
+    }
+
+    /// The modes `render` accepts (Gymnasium's `metadata["render_modes"]`).
+    fn render_modes(&self) -> PyResult<Vec<&'static str>> {
+        let lock = self.core()?;
+        let st = lock.as_ref().ok_or_else(closed)?;
+        Ok(st.core.env.render_modes().to_vec())
+    }
+
+    /// Draws the current state in `mode`, one of `render_modes()`: a C-contiguous uint8 array
+    /// `(height, width, 3)` for `"rgb_array"`, a `str` for the text modes (`"svg"`, `"html"`).
+    /// Any other mode raises `ValueError` naming the supported ones.
+    fn render<'py>(&self, py: Python<'py>, mode: &str) -> PyResult<Bound<'py, PyAny>> {
+        let mut lock = self.core()?;
+        let st = lock.as_mut().ok_or_else(closed)?;
+        let env = &mut st.core.env;
+        let frame = py.detach(|| guard("render", || env.render(mode).map_err(env_error)))?;
+        match frame {
+            Frame::Rgb {
+                height,
+                width,
+                data,
+            } => Ok(PyArray1::from_vec(py, data)
+                .reshape([height, width, 3])?
+                .into_any()),
+            Frame::Text(text) => Ok(PyString::new(py, &text).into_any()),
+        }
     }
 }
 

@@ -21,12 +21,13 @@ use numpy::{
 };
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList, PyTuple};
+use pyo3::types::{PyDict, PyTuple};
 
 use crate::convert::{ActionSpec, type_name_of};
 use crate::env::{
     EpisodeCore, IllegalAction, ObsLayout, build_env, env_kwargs, guard_close, spec_to_py,
 };
+use crate::errors::guard;
 
 /// Gymnasium's autoreset modes that are supported.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -240,6 +241,39 @@ fn build_on_threads<T: Send>(
         .collect()
 }
 
+/// Adds the scalar diagnostics of `n` environments' infos (`info(i)`, `None`: environment `i`
+/// has none) to the vector info dict `d` in Gymnasium's layout: each key a float64 array over the
+/// environments (0 where absent), `_key` a boolean array saying which have it.
+fn put_scalar_infos<'a>(
+    d: &Bound<'_, PyDict>,
+    n: usize,
+    info: impl Fn(usize) -> Option<&'a a2perf_core::Info>,
+) -> PyResult<()> {
+    let py = d.py();
+    let mut keys: Vec<&str> = Vec::new();
+    for k in (0..n)
+        .filter_map(&info)
+        .flat_map(|inf| inf.iter().map(|(k, _)| k))
+    {
+        if !keys.contains(&k) {
+            keys.push(k);
+        }
+    }
+    for k in keys {
+        let mut values = vec![0.0f64; n];
+        let mut has = vec![false; n];
+        for i in 0..n {
+            if let Some(v) = info(i).and_then(|inf| inf.get(k)) {
+                values[i] = v;
+                has[i] = true;
+            }
+        }
+        d.set_item(k, PyArray1::from_slice(py, &values))?;
+        d.set_item(format!("_{k}"), PyArray1::from_slice(py, &has))?;
+    }
+    Ok(())
+}
+
 /// Runs `one` over the slots split into contiguous chunks, one per thread ([`chunk`]): the
 /// calling thread takes the first chunk and worker `k` of `crew` always chunk `k`. An
 /// environment so stays on one thread from step to step (its state stays in that core's cache)
@@ -369,10 +403,13 @@ impl PyVecEnv {
                 work(i, slot, &actions[i])?;
                 write_slot(layout, slot, out)
             };
-            py.detach(|| match &st.workers {
-                // No thread hand-off for a single environment.
-                None => run_chunk(0, &mut st.slots, &mut outs, &one),
-                Some(pool) => run_pinned(pool, &mut st.slots, &mut outs, &one),
+            // A panic on this thread becomes an error, as a worker's does (see `run_pinned`).
+            py.detach(|| {
+                guard("the vector step", || match &st.workers {
+                    // No thread hand-off for a single environment.
+                    None => run_chunk(0, &mut st.slots, &mut outs, &one),
+                    Some(pool) => run_pinned(pool, &mut st.slots, &mut outs, &one),
+                })
             })?;
         }
         let obs = self
@@ -401,78 +438,75 @@ impl PyVecEnv {
     ) -> PyResult<Bound<'py, PyDict>> {
         let n = st.slots.len();
         let d = PyDict::new(py);
-        let mut keys: Vec<&str> = Vec::new();
-        for s in &st.slots {
-            for (k, _) in s.core.step.info.iter() {
-                if !keys.contains(&k) {
-                    keys.push(k);
-                }
-            }
-        }
-        for k in keys {
-            let mut values = vec![0.0f64; n];
-            let mut has = vec![false; n];
-            for (i, s) in st.slots.iter().enumerate() {
-                if let Some(v) = s.core.step.info.get(k) {
-                    values[i] = v;
-                    has[i] = true;
-                }
-            }
-            d.set_item(k, PyArray1::from_slice(py, &values))?;
-            d.set_item(format!("_{k}"), PyArray1::from_slice(py, &has))?;
-        }
+        put_scalar_infos(&d, n, |i| Some(&st.slots[i].core.step.info))?;
         if let Some(m) = masks {
             d.set_item(pyo3::intern!(py, "action_mask"), m)?;
             d.set_item("_action_mask", PyArray1::from_slice(py, &vec![true; n]))?;
         }
-        let illegal: Vec<bool> = st
-            .slots
-            .iter()
-            .map(|s| {
-                if s.ended {
-                    s.final_illegal
-                } else {
-                    s.core.illegal
-                }
-            })
-            .collect();
+        // Same-step mode: an ended environment's illegal action is reported in `final_info`,
+        // its info here being the new episode's (as Gymnasium's `SyncVectorEnv` does).
+        let illegal: Vec<bool> = st.slots.iter().map(|s| s.core.illegal).collect();
         if illegal.iter().any(|b| *b) {
             d.set_item("illegal_action", PyArray1::from_slice(py, &illegal))?;
             d.set_item("_illegal_action", PyArray1::from_slice(py, &illegal))?;
         }
         if self.autoreset == Autoreset::SameStep && st.slots.iter().any(|s| s.ended) {
-            let np = py.import("numpy")?;
-            let final_obs = PyList::empty(py);
-            let final_info = PyList::empty(py);
-            for s in &st.slots {
+            let ended: Vec<bool> = st.slots.iter().map(|s| s.ended).collect();
+            let final_obs = py
+                .import("numpy")?
+                .call_method1("full", (n, py.None(), "object"))?;
+            for (i, s) in st.slots.iter().enumerate() {
                 if s.ended {
-                    final_obs.append(self.layout.to_py(py, &s.final_obs)?)?;
-                    let fi = PyDict::new(py);
-                    for (k, v) in s.final_info.iter() {
-                        fi.set_item(k, v)?;
-                    }
-                    if s.final_illegal {
-                        fi.set_item("illegal_action", true)?;
-                    }
-                    final_info.append(fi)?;
-                } else {
-                    final_obs.append(py.None())?;
-                    final_info.append(PyDict::new(py))?;
+                    final_obs.set_item(i, self.layout.to_py(py, &s.final_obs)?)?;
                 }
             }
-            let ended: Vec<bool> = st.slots.iter().map(|s| s.ended).collect();
-            let as_objects = |l: Bound<'py, PyList>| -> PyResult<Bound<'py, PyAny>> {
-                let arr =
-                    np.call_method1("empty", (n, py.import("builtins")?.getattr("object")?))?;
-                for (i, x) in l.iter().enumerate() {
-                    arr.set_item(i, x)?;
-                }
-                Ok(arr)
-            };
-            d.set_item("final_obs", as_objects(final_obs)?)?;
+            d.set_item("final_obs", final_obs)?;
             d.set_item("_final_obs", PyArray1::from_slice(py, &ended))?;
-            d.set_item("final_info", as_objects(final_info)?)?;
+            d.set_item("final_info", self.final_infos(py, st)?)?;
             d.set_item("_final_info", PyArray1::from_slice(py, &ended))?;
+        }
+        Ok(d)
+    }
+
+    /// Same-step mode's `final_info`: the ended environments' last infos as one vector info dict
+    /// (each key an array over environments, `_key` saying which have it), built as Gymnasium's
+    /// `SyncVectorEnv` builds it from single environments' infos: scalar diagnostics (float64),
+    /// `action_mask` (int8 rows of the final observations' masks) and `illegal_action`.
+    fn final_infos<'py>(&self, py: Python<'py>, st: &State) -> PyResult<Bound<'py, PyDict>> {
+        let n = st.slots.len();
+        let d = PyDict::new(py);
+        put_scalar_infos(&d, n, |i| {
+            let s = &st.slots[i];
+            s.ended.then_some(&s.final_info)
+        })?;
+        if let ActionSpec::Discrete(k) = self.action {
+            let masks = PyArray2::<i8>::zeros(py, [n, k], false);
+            let mut has = vec![false; n];
+            {
+                let mut rw = masks.readwrite();
+                let mut rows = rw.as_array_mut();
+                for (i, s) in st.slots.iter().enumerate() {
+                    if let Some(mask) = s.final_obs.action_mask.as_ref().filter(|_| s.ended) {
+                        for (out, legal) in rows.row_mut(i).iter_mut().zip(mask) {
+                            *out = i8::from(*legal);
+                        }
+                        has[i] = true;
+                    }
+                }
+            }
+            if has.iter().any(|h| *h) {
+                d.set_item("action_mask", masks)?;
+                d.set_item("_action_mask", PyArray1::from_slice(py, &has))?;
+            }
+        }
+        let illegal: Vec<bool> = st
+            .slots
+            .iter()
+            .map(|s| s.ended && s.final_illegal)
+            .collect();
+        if illegal.iter().any(|b| *b) {
+            d.set_item("illegal_action", PyArray1::from_slice(py, &illegal))?;
+            d.set_item("_illegal_action", PyArray1::from_slice(py, &illegal))?;
         }
         Ok(d)
     }
@@ -663,6 +697,16 @@ impl PyVecEnv {
     ) -> PyResult<Bound<'py, PyTuple>> {
         let mut st = self.state()?;
         self.parse_actions(&mut st, actions)?;
+        // All or nothing: a step that one environment refuses steps none of them, so that the
+        // environments stay in step with each other (and with the caller's view of them).
+        for (i, (slot, action)) in st.slots.iter().zip(&st.actions).enumerate() {
+            if let Some(refusal) = (!slot.pending_reset)
+                .then(|| slot.core.refusal(action))
+                .flatten()
+            {
+                return Err(refusal.into_err(&format!("environment {i}: ")));
+            }
+        }
         let mode = self.autoreset;
         self.run(py, &mut st, |_, slot, action| {
             slot.ended = false;

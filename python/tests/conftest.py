@@ -8,6 +8,8 @@ A2PERF_REQUIRE_CHROME=1 (as the Rust tests do).
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -26,6 +28,30 @@ def shared(*parts: str) -> Path:
             pytest.fail(f"A2PERF_REQUIRE_SHARED=1 but {path} is missing")
         pytest.skip(f"{path} not present")
     return path
+
+
+def a2perf_cli() -> str:
+    """The `a2perf` binary to compare the package with: `$A2PERF_BIN` (scripts/test sets it to
+    the binary its `cargo test --workspace --release` just built, so it must exist), else
+    `$CARGO_TARGET_DIR/release/a2perf` or `target/release/a2perf`, else `a2perf` on PATH, else
+    built here with `cargo build --release -p a2perf-cli` (skip when there is no cargo)."""
+    if os.environ.get("A2PERF_BIN"):
+        if not Path(os.environ["A2PERF_BIN"]).is_file():
+            pytest.fail(f"A2PERF_BIN={os.environ['A2PERF_BIN']} does not exist")
+        return os.environ["A2PERF_BIN"]
+    target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
+    if not target.is_absolute():
+        target = REPO / target
+    binary = target / "release" / "a2perf"
+    if binary.is_file():
+        return str(binary)
+    on_path = shutil.which("a2perf")
+    if on_path:
+        return on_path
+    if shutil.which("cargo") is None:
+        pytest.skip("no a2perf binary (set A2PERF_BIN) and no cargo to build it")
+    subprocess.run(["cargo", "build", "--release", "-p", "a2perf-cli"], cwd=REPO, check=True)
+    return str(binary)
 
 
 def require_chromium() -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -13,7 +12,7 @@ import numpy as np
 import pytest
 
 from a2perf_rs.circuit import PlacementCost
-from conftest import REPO, shared
+from conftest import a2perf_cli, shared
 
 
 def close(a: float, b: float) -> bool:
@@ -112,23 +111,9 @@ def test_google_binary_reference_on_macro_tiles() -> None:
     assert close(plc.get_area(), g["get_area"])
 
 
-def _cli() -> str | None:
-    if os.environ.get("A2PERF_BIN"):
-        return os.environ["A2PERF_BIN"]
-    target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
-    for p in (target / "release" / "a2perf", shutil.which("a2perf")):
-        if p and Path(p).exists():
-            return str(p)
-    return None
-
-
 def test_equal_to_a2perf_circuit_cost_with_the_same_settings(tmp_path: Path) -> None:
     root = shared("circuit", "ariane133_ng45")
-    cli = _cli()
-    if cli is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("the a2perf binary is not built ($CARGO_TARGET_DIR/release/a2perf)")
-        pytest.skip("the a2perf binary is not built (cargo build --release -p a2perf-cli)")
+    cli = a2perf_cli()
     netlist, placement = root / "netlist.pb.txt.gz", root / "legalized.plc"
     for flags, setup in [
         ([], lambda p: None),

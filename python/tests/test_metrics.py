@@ -1,16 +1,19 @@
 """a2perf_rs.metrics against the golden values the Rust tests use, at the same tolerances
-(a2perf-metrics/tests/golden_reliability.rs and golden_rliable.rs)."""
+(a2perf-metrics/tests/golden_reliability.rs and golden_rliable.rs); scores DataFrames against
+the arrays they hold; and against `a2perf metrics` for the same CSV files."""
 
 from __future__ import annotations
 
 import json
+import subprocess
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
 from a2perf_rs import metrics
-from conftest import shared
+from conftest import a2perf_cli, shared
 
 # Tolerances of golden_reliability.rs.
 REL, ABS = 1e-9, 1e-12
@@ -183,3 +186,202 @@ def test_iqm_table_matches_the_clis_columns(rl: dict) -> None:
     x = table.set_index("algorithm").loc["X"]
     close("iqm", x["iqm"], rl["point_estimates"]["aggregate_iqm_X"], POINT, 0.0)
     assert x["ci_lower"] < x["iqm"] < x["ci_upper"]
+
+
+# Scores DataFrames (the columns of scores.csv) give, per algorithm, the numbers of the arrays.
+
+SCORE_COLUMNS = ["algorithm", "task", "run", "score"]
+
+
+def scores_frame(rl: dict, algos: str = "XYZ") -> pd.DataFrame:
+    rows = [
+        (algo, f"task{t}", f"run{r}", v)
+        for algo in algos
+        for r, row in enumerate(rl["inputs"][algo])
+        for t, v in enumerate(row)
+    ]
+    return pd.DataFrame(rows, columns=SCORE_COLUMNS)
+
+
+def test_one_algorithm_frame_equals_its_array(rl: dict) -> None:
+    x = np.array(rl["inputs"]["X"])
+    # Task-major instead of run-major rows (tasks and runs first appear in the same order, which
+    # fixes the matrix's columns and rows), scores as text (a column read_csv left as strings):
+    # the same matrix.
+    frames = [
+        scores_frame(rl, "X"),
+        scores_frame(rl, "X").sort_values(["task", "run"]),
+        scores_frame(rl, "X").astype({"score": str}),
+    ]
+    taus = rl["inputs"]["taus"]
+    for f in frames:
+        assert list(metrics.iqm(f)["iqm"]) == [metrics.iqm(x)]
+        agg = metrics.aggregates(f, ("median", "iqm", "mean", "optimality_gap"), gamma=0.8)
+        want = metrics.aggregates(x, ("median", "iqm", "mean", "optimality_gap"), gamma=0.8)
+        assert list(agg.columns) == [
+            "algorithm", "median", "iqm", "mean", "optimality_gap", "runs", "tasks"
+        ]
+        assert agg.iloc[0][list(want)].tolist() == list(want.values())
+        assert (agg.iloc[0]["runs"], agg.iloc[0]["tasks"]) == x.shape
+        ci = metrics.aggregate_ci(f, ("iqm", "mean"), reps=500, seed=3)
+        want_ci = metrics.aggregate_ci(x, ("iqm", "mean"), reps=500, seed=3)
+        assert list(ci.columns) == [
+            "algorithm", "iqm", "iqm_ci_lower", "iqm_ci_upper",
+            "mean", "mean_ci_lower", "mean_ci_upper", "runs", "tasks",
+        ]
+        for n in ("iqm", "mean"):
+            got = ci.iloc[0][[n, f"{n}_ci_lower", f"{n}_ci_upper"]].tolist()
+            assert tuple(got) == want_ci[n]
+        row = metrics.iqm_ci(f, reps=500).iloc[0]
+        assert (row["iqm"], row["ci_lower"], row["ci_upper"]) == metrics.iqm_ci(x, reps=500)
+        for over_runs in (True, False):
+            prof = metrics.performance_profile(f, taus, over_runs=over_runs, reps=300)
+            want_p = metrics.performance_profile(x, taus, over_runs=over_runs, reps=300)
+            assert list(prof.columns) == ["algorithm", "tau", "profile", "ci_lower", "ci_upper"]
+            assert prof["tau"].tolist() == [float(t) for t in taus]
+            for col, w in zip(("profile", "ci_lower", "ci_upper"), want_p):
+                np.testing.assert_array_equal(prof[col].to_numpy(), w)
+
+
+def test_probability_of_improvement_of_two_frames_equals_the_arrays(rl: dict) -> None:
+    x, y = np.array(rl["inputs"]["X"]), np.array(rl["inputs"]["Y"])
+    fx = scores_frame(rl, "X")
+    # y's tasks in another order: aligned by name.
+    fy = scores_frame(rl, "Y").sort_values("task", ascending=False, kind="stable")
+    assert metrics.probability_of_improvement(fx, fy, reps=500) == \
+        metrics.probability_of_improvement(x, y, reps=500)
+    point = metrics.probability_of_improvement(fx, fy, reps=0)[0]
+    close("poi", point, rl["point_estimates"]["probability_of_improvement_X_over_Y"], POINT, 0.0)
+
+
+def test_multi_algorithm_frame_gives_per_algorithm_results(rl: dict) -> None:
+    frame = scores_frame(rl, "XYZ")
+    arrays = {a: np.array(rl["inputs"][a]) for a in "XYZ"}
+    iqms = metrics.iqm(frame)
+    assert list(iqms.columns) == ["algorithm", "iqm", "runs", "tasks"]
+    assert iqms["algorithm"].tolist() == ["X", "Y", "Z"]
+    assert iqms["iqm"].tolist() == [metrics.iqm(arrays[a]) for a in "XYZ"]
+    agg = metrics.aggregates(frame).set_index("algorithm")
+    ci = metrics.aggregate_ci(frame, ("median",), reps=400).set_index("algorithm")
+    for a, s in arrays.items():
+        assert agg.loc[a, ["median", "iqm", "mean"]].tolist() == list(metrics.aggregates(s).values())
+        p, lo, hi = metrics.aggregate_ci(s, ("median",), reps=400)["median"]
+        assert ci.loc[a, ["median", "median_ci_lower", "median_ci_upper"]].tolist() == [p, lo, hi]
+    prof = metrics.performance_profile(frame, [0.0, 0.5], reps=200)
+    assert len(prof) == 6
+    for a, s in arrays.items():
+        mine = prof[prof["algorithm"] == a]
+        want = metrics.performance_profile(s, [0.0, 0.5], reps=200)
+        np.testing.assert_array_equal(mine[["profile", "ci_lower", "ci_upper"]].to_numpy().T, want)
+    poi = metrics.probability_of_improvement(frame, reps=300)
+    assert list(poi.columns) == ["x", "y", "probability", "ci_lower", "ci_upper", "tasks"]
+    assert list(zip(poi["x"], poi["y"])) == [
+        ("X", "Y"), ("X", "Z"), ("Y", "X"), ("Y", "Z"), ("Z", "X"), ("Z", "Y")
+    ]
+    for _, r in poi.iterrows():
+        want = metrics.probability_of_improvement(arrays[r["x"]], arrays[r["y"]], reps=300)
+        assert (r["probability"], r["ci_lower"], r["ci_upper"]) == want
+        assert r["tasks"] == 3
+
+
+SCORE_FUNCTIONS = {
+    "iqm": lambda f: metrics.iqm(f),
+    "aggregates": lambda f: metrics.aggregates(f),
+    "aggregate_ci": lambda f: metrics.aggregate_ci(f, reps=100),
+    "iqm_ci": lambda f: metrics.iqm_ci(f, reps=100),
+    "performance_profile": lambda f: metrics.performance_profile(f, [0.5], reps=100),
+    "probability_of_improvement": lambda f: metrics.probability_of_improvement(f, reps=100),
+    "probability_of_improvement(x, y)": lambda f: metrics.probability_of_improvement(
+        f[f["algorithm"] == "X"], f[f["algorithm"] == "Y"], reps=100
+    ),
+}
+
+
+@pytest.mark.parametrize("fn", list(SCORE_FUNCTIONS))
+def test_bad_scores_frames_name_the_column_and_row(rl: dict, fn: str) -> None:
+    call = SCORE_FUNCTIONS[fn]
+    good = scores_frame(rl, "XY")
+    with pytest.raises(ValueError, match=r"scores: missing column 'score'"):
+        call(good.rename(columns={"score": "return"}))
+    bad = good.astype({"score": object})
+    bad.loc[bad.index[3], "score"] = "abc"
+    with pytest.raises(ValueError, match=r"scores:3: column 'score': 'abc' is not a number"):
+        call(bad)
+    missing_run = good.astype({"run": object})
+    missing_run.loc[missing_run.index[4], "run"] = None
+    with pytest.raises(ValueError, match=r"scores:4: column 'run' has no value"):
+        call(missing_run)
+    nan = good.copy()
+    nan.loc[nan.index[5], "score"] = np.nan
+    with pytest.raises(ValueError, match=r"scores:5: score `NaN` is not finite"):
+        call(nan)
+    dup = pd.concat([good.iloc[:10], good.iloc[[7]], good.iloc[10:]], ignore_index=True)
+    with pytest.raises(
+        ValueError,
+        match=r"scores:10: duplicate score for algorithm `X`, task `task1`, run `run2` "
+        r"\(first on line 7\)",
+    ):
+        call(dup)
+    with pytest.raises(ValueError, match=r"algorithm `X` has no score for task `task2`, run `run9`"):
+        call(good.drop(index=29))
+
+
+def test_probability_of_improvement_frame_arguments(rl: dict) -> None:
+    frame = scores_frame(rl, "XY")
+    with pytest.raises(ValueError, match=r"needs two algorithms, found 1 \(X\)"):
+        metrics.probability_of_improvement(scores_frame(rl, "X"))
+    with pytest.raises(ValueError, match=r"x: expected the scores of one algorithm, found 2 \(X, Y\)"):
+        metrics.probability_of_improvement(frame, scores_frame(rl, "Z"))
+    other_tasks = scores_frame(rl, "Y").replace({"task": {"task2": "task9"}})
+    with pytest.raises(ValueError, match=r"only in x: \['task2'\], only in y: \['task9'\]"):
+        metrics.probability_of_improvement(scores_frame(rl, "X"), other_tasks)
+    with pytest.raises(TypeError, match="both be arrays or both DataFrames"):
+        metrics.probability_of_improvement(scores_frame(rl, "X"), np.array(rl["inputs"]["Y"]))
+    with pytest.raises(TypeError, match="y is required"):
+        metrics.probability_of_improvement(np.array(rl["inputs"]["X"]))
+
+
+# The same numbers as the a2perf binary.
+
+
+def _cli_json(*args: str) -> dict:
+    out = subprocess.run([a2perf_cli(), "metrics", *args, "--json"], check=True, capture_output=True,
+                         text=True)
+    return json.loads(out.stdout)
+
+
+def _nan_as_null(x):
+    if isinstance(x, dict):
+        return {k: _nan_as_null(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_nan_as_null(v) for v in x]
+    return None if isinstance(x, float) and np.isnan(x) else x
+
+
+@pytest.mark.parametrize("definition", ["chan2019", "a2perf"])
+def test_reliability_equals_a2perf_metrics_reliability(
+    golden: dict, curves: pd.DataFrame, tmp_path: Path, definition: str
+) -> None:
+    curves.to_csv(tmp_path / "curves.csv", index=False)
+    rollouts = pd.DataFrame({"return": golden["inputs"]["rollouts"]})
+    rollouts.to_csv(tmp_path / "rollouts.csv", index=False)
+    want = _cli_json("reliability", "--curves", str(tmp_path / "curves.csv"), "--rollouts",
+                     str(tmp_path / "rollouts.csv"), "--definition", definition)
+    got = metrics.reliability(curves, rollouts, definition=definition)
+    # Same keys and values (the CLI's JSON has its keys sorted and NaN as null).
+    assert sorted(got) == sorted(want)
+    assert _nan_as_null(got) == want
+    if definition == "chan2019":
+        assert len(want) == 8 and want["LowerCVaROnAcross"]["values"]
+
+
+def test_iqm_ci_of_a_frame_equals_a2perf_metrics_iqm(rl: dict, tmp_path: Path) -> None:
+    frame = scores_frame(rl, "XYZ")
+    frame.to_csv(tmp_path / "scores.csv", index=False)
+    want = _cli_json("iqm", "--scores", str(tmp_path / "scores.csv"), "--reps", "3000",
+                     "--seed", "7")
+    table = metrics.iqm_ci(frame, reps=3000, seed=7)
+    assert list(table["algorithm"]) == list(want["algorithms"])
+    for _, row in table.iterrows():
+        w = want["algorithms"][row["algorithm"]]
+        assert {k: row[k] for k in w} == w

@@ -3,17 +3,14 @@ trained with TrainingRun, inferred and generalized from Python, and a PPO run tr
 `a2perf` CLI, merged by `a2perf report` (and by `a2perf_rs.report`) into one set of tables,
 radar plots and leaderboard entries. Tiny budgets: this checks the plumbing, not the learning.
 
-The CLI is `$A2PERF_BIN`, else `$CARGO_TARGET_DIR/release/a2perf` or `target/release/a2perf`
-(which `cargo test --workspace --release` in `scripts/test` builds), else `a2perf` on PATH,
-else built here with `cargo build --release -p a2perf-cli`."""
+The CLI is the one `conftest.a2perf_cli` finds (in `scripts/test`: the binary its `cargo test`
+just built)."""
 
 from __future__ import annotations
 
 import csv
 import importlib.util
 import json
-import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -21,28 +18,10 @@ from pathlib import Path
 import pytest
 
 import a2perf_rs
-from conftest import REPO
+from conftest import REPO, a2perf_cli
 
 EXAMPLE = REPO / "examples" / "python"
 TASK = "WebNavigation-Difficulty-01-v0[num_websites=1]"
-
-
-def a2perf_cli() -> str:
-    if os.environ.get("A2PERF_BIN"):
-        return os.environ["A2PERF_BIN"]
-    target = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
-    if not target.is_absolute():
-        target = REPO / target
-    binary = target / "release" / "a2perf"
-    if binary.is_file():
-        return str(binary)
-    on_path = shutil.which("a2perf")
-    if on_path:
-        return on_path
-    if shutil.which("cargo") is None:
-        pytest.skip("no a2perf binary (set A2PERF_BIN) and no cargo to build it")
-    subprocess.run(["cargo", "build", "--release", "-p", "a2perf-cli"], cwd=REPO, check=True)
-    return str(binary)
 
 
 def run(*args: str, cwd: Path = REPO) -> str:

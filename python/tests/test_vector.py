@@ -84,6 +84,90 @@ def test_vector_equals_n_single_environments(env_id: str, params: dict, steps: i
     venv.close()
 
 
+def _same_infos(a: dict, b: dict, path: str = "infos") -> None:
+    """Asserts two vector info dicts equal: the same keys, arrays of the same dtype and values,
+    object arrays (``final_obs``) element by element, nested dicts (``final_info``) recursively."""
+    assert sorted(a) == sorted(b), f"{path}: keys {sorted(a)} vs {sorted(b)}"
+    for k in a:
+        x, y = a[k], b[k]
+        if isinstance(x, dict):
+            assert isinstance(y, dict), f"{path}[{k!r}]: a dict vs {type(y).__name__}"
+            _same_infos(x, y, f"{path}[{k!r}]")
+        elif x.dtype == object:
+            assert y.dtype == object and len(x) == len(y), f"{path}[{k!r}]"
+            for u, v in zip(x, y):
+                assert (u is None and v is None) or _equal(u, v), f"{path}[{k!r}]"
+        else:
+            assert x.dtype == y.dtype, f"{path}[{k!r}]: dtype {x.dtype} vs {y.dtype}"
+            np.testing.assert_array_equal(x, y, err_msg=f"{path}[{k!r}]")
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+@pytest.mark.parametrize(("env_id", "params", "steps"), CASES)
+def test_everything_returned_equals_gymnasium_sync_vector_env_over_single_envs(
+    env_id: str, params: dict, steps: int, mode: AutoresetMode
+) -> None:
+    # Gymnasium's own SyncVectorEnv over single A2PerfEnvs is the reference for the whole
+    # return value, infos included (same-step mode's final_obs/final_info among them). A quarter
+    # of the discrete actions are drawn from the whole space, so illegal actions occur.
+    n = 3
+    venv = A2PerfVectorEnv(env_id, num_envs=n, autoreset_mode=mode, **params)
+    sync = gym.vector.SyncVectorEnv(
+        [lambda: A2PerfEnv(env_id, **params) for _ in range(n)], autoreset_mode=mode
+    )
+    (obs, infos), (s_obs, s_infos) = venv.reset(seed=5), sync.reset(seed=5)
+    assert _equal(obs, s_obs)
+    _same_infos(infos, s_infos)
+    rng = np.random.default_rng(1)
+    seen = set()
+    for _ in range(steps):
+        actions = _actions(venv, infos, rng)
+        if isinstance(venv.single_action_space, gym.spaces.Discrete):
+            wild = rng.random(n) < 0.25
+            actions[wild] = rng.integers(0, venv.single_action_space.n, int(wild.sum()))
+        out, s_out = venv.step(actions), sync.step(actions)
+        assert _equal(out[0], s_out[0])
+        for x, y in zip(out[1:4], s_out[1:4]):
+            assert x.dtype == y.dtype
+            np.testing.assert_array_equal(x, y)
+        _same_infos(out[4], s_out[4])
+        infos = out[4]
+        seen |= set(infos) | {f"final_info.{k}" for k in infos.get("final_info", {})}
+    if mode == AutoresetMode.SAME_STEP:
+        assert "final_obs" in seen, "the run should cover same-step autoresets"
+    if env_id.startswith("Web"):
+        assert "illegal_action" in seen or "final_info.illegal_action" in seen
+    venv.close()
+    sync.close()
+
+
+def test_a_refused_action_steps_no_environment() -> None:
+    # illegal_action="raise": one environment's masked-out action refuses the whole batch, so
+    # the environments stay in step with each other and with single environments.
+    env_id, params = "WebNavigation-Difficulty-01-v0", {"num_websites": 3}
+    venv = A2PerfVectorEnv(env_id, num_envs=2, illegal_action="raise", **params)
+    singles = [A2PerfEnv(env_id, illegal_action="raise", **params) for _ in range(2)]
+    with pytest.raises(RuntimeError, match="environment 0: step.. called before reset"):
+        venv.step(np.zeros(2, np.int64))
+    _, infos = venv.reset(seed=2)
+    for i, env in enumerate(singles):
+        env.reset(seed=2 + i)
+    illegal = np.flatnonzero(infos["action_mask"][1] == 0)
+    legal = np.flatnonzero(infos["action_mask"][0])
+    assert illegal.size and legal.size
+    with pytest.raises(ValueError, match=rf"environment 1: action {illegal[0]} is masked out"):
+        venv.step(np.array([legal[0], illegal[0]]))
+    # Nothing moved: the next legal batch matches single environments stepped once.
+    legal1 = np.flatnonzero(infos["action_mask"][1])
+    obs, rewards, *_ = venv.step(np.array([legal[0], legal1[0]]))
+    for i, (env, a) in enumerate(zip(singles, (legal[0], legal1[0]))):
+        o, r, *_ = env.step(a)
+        assert _equal(_row(obs, i), o) and rewards[i] == r
+    with pytest.raises(ValueError, match=r"environment 1: action 18446744073709551615 is outside"):
+        venv.step(np.array([0, 2**64 - 1], np.uint64))
+    venv.close()
+
+
 def test_same_step_autoreset_reports_the_final_observation() -> None:
     venv = A2PerfVectorEnv(
         "QuadrupedLocomotion-DogPace-v0",
