@@ -56,43 +56,12 @@ import gymnasium as gym
 import numpy as np
 
 from . import _native
+from ._render import NAMESPACE, RENDER_METADATA, _domain, check_render_mode, render_metadata
 from .spaces import to_gymnasium
 from .vector import A2PerfVectorEnv
 
-NAMESPACE = "a2perf"
-
 # Keyword arguments handled by the Python bindings rather than by the environment itself.
 BINDING_KWARGS = ("illegal_action", "illegal_action_reward")
-
-# Render modes and frame rates of each domain's ids: what `gymnasium.make` checks `render_mode`
-# against before building anything. The Rust environments' own `render_modes()` are the
-# authority (test_render.py checks every id agrees).
-RENDER_METADATA: dict[str, dict[str, Any]] = {
-    "circuit_training": {"render_modes": ["rgb_array", "svg"], "render_fps": 4},
-    # One frame per control step of 33 ms.
-    "quadruped_locomotion": {"render_modes": ["rgb_array"], "render_fps": 1000 / 33},
-    "web_navigation": {"render_modes": ["html"], "render_fps": 4},
-}
-
-
-def _domain(env_id: str) -> str | None:
-    """The domain of ``env_id`` (without namespace), ``None`` for an unknown id."""
-    for entry_id, domain, _summary, _params in _native.env_entries():
-        if entry_id == env_id:
-            return str(domain)
-    return None
-
-
-def render_metadata(env_id: str) -> dict[str, Any]:
-    """``{"render_modes": [...], "render_fps": ...}`` of ``env_id`` (with or without the
-    ``a2perf/`` namespace): Gymnasium's ``metadata`` of its environments."""
-    bare = env_id.split("/", 1)[1] if env_id.startswith(NAMESPACE + "/") else env_id
-    domain = _domain(bare)
-    if domain is None:
-        raise gym.error.UnregisteredEnv(f"no a2perf environment {env_id!r}")
-    meta = RENDER_METADATA.get(domain, {"render_modes": [], "render_fps": None})
-    return {"render_modes": list(meta["render_modes"]), "render_fps": meta["render_fps"]}
-
 
 class A2PerfEnv(gym.Env[Any, Any]):
     """One environment of the benchmark, stepped in Rust.
@@ -128,7 +97,7 @@ class A2PerfEnv(gym.Env[Any, Any]):
         domain = _domain(env_id)
         if render_mode is not None and domain is not None:
             # Checked before building: a bad argument must not start a browser first.
-            _check_render_mode(env_id, render_mode, render_metadata(env_id)["render_modes"])
+            check_render_mode(env_id, render_mode, render_metadata(env_id)["render_modes"])
         self._native = _native.Env(
             env_id,
             params,
@@ -139,7 +108,7 @@ class A2PerfEnv(gym.Env[Any, Any]):
         modes = list(self._native.render_modes())
         if render_mode is not None:
             try:
-                _check_render_mode(env_id, render_mode, modes)
+                check_render_mode(env_id, render_mode, modes)
             except ValueError:
                 self._native.close()
                 raise
@@ -193,15 +162,6 @@ class A2PerfEnv(gym.Env[Any, Any]):
         return f"A2PerfEnv({self.env_id!r})"
 
 
-def _check_render_mode(env_id: str, render_mode: str, modes: list[str]) -> None:
-    if render_mode not in modes:
-        supported = ", ".join(repr(m) for m in modes) if modes else "none"
-        raise ValueError(
-            f"render_mode={render_mode!r} is not supported by {env_id}: its render modes are "
-            f"{supported} (or None for no rendering)"
-        )
-
-
 class _EnvCreator:
     """The Gymnasium entry point of one id: builds an :class:`A2PerfEnv`, and carries the id's
     ``metadata``, which ``gymnasium.make`` reads to check ``render_mode`` (and to offer the
@@ -221,7 +181,7 @@ def env_params(env_id: str) -> list[tuple[str, str, list[str], Any, str]]:
     """The typed parameters of ``env_id`` (with or without the ``a2perf/`` namespace) as
     ``(name, kind, choices, default, doc)``."""
     bare = env_id.split("/", 1)[1] if env_id.startswith(NAMESPACE + "/") else env_id
-    for entry_id, _domain, _summary, params in _native.env_entries():
+    for entry_id, _kind, _summary, params in _native.env_entries():
         if entry_id == bare:
             return list(params)
     raise gym.error.UnregisteredEnv(f"no a2perf environment {env_id!r}")
@@ -234,7 +194,7 @@ def env_ids() -> list[str]:
 
 def register_all() -> None:
     """Registers every benchmark environment in Gymnasium's ``a2perf`` namespace (idempotent)."""
-    for entry_id, _domain, _summary, _params in _native.env_entries():
+    for entry_id, _kind, _summary, _params in _native.env_entries():
         full = f"{NAMESPACE}/{entry_id}"
         if full in gym.registry:
             continue

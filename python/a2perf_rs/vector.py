@@ -36,6 +36,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from . import _native
+from ._render import check_render_mode, render_metadata
 from .spaces import to_gymnasium
 
 _MODES = {AutoresetMode.NEXT_STEP: "next_step", AutoresetMode.SAME_STEP: "same_step"}
@@ -51,6 +52,9 @@ class A2PerfVectorEnv(VectorEnv):
         copy: Return fresh arrays each call (default) or the vector environment's own buffers,
             overwritten by the next call.
         illegal_action, illegal_action_reward: As for :class:`a2perf_rs.envs.A2PerfEnv`.
+        render_mode: ``None`` (default) or one of the id's render modes (as for
+            :class:`a2perf_rs.envs.A2PerfEnv`): :meth:`render` then returns every environment's
+            frame.
         max_episode_steps: Ignored unless it equals the environment's own limit (Gymnasium passes
             the registered value, which is ``None`` here); the environments truncate themselves.
         episode_seeds: A training run's seed: every reset without a seed of environment ``i``
@@ -78,8 +82,10 @@ class A2PerfVectorEnv(VectorEnv):
             raise TypeError(f"num_envs must be an integer, got {type(num_envs).__name__}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        meta = render_metadata(env_id)
         if render_mode is not None:
-            raise ValueError(f"render_mode={render_mode!r} is not supported: no frame renderer")
+            # Checked before building: a bad argument must not start browsers first.
+            check_render_mode(env_id, render_mode, meta["render_modes"])
         mode = AutoresetMode(autoreset_mode)
         if mode not in _MODES:
             raise ValueError(
@@ -107,8 +113,8 @@ class A2PerfVectorEnv(VectorEnv):
         self.single_action_space = to_gymnasium(spec["action_space"])
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.metadata = {"autoreset_mode": mode, "render_modes": []}
-        self.render_mode = None
+        self.metadata = {"autoreset_mode": mode, **meta}
+        self.render_mode = render_mode
         self.max_episode_steps: int | None = spec["max_episode_steps"]
         self.params: dict[str, Any] = spec["params"]
         self.provenance: dict[str, str] = spec["metadata"]
@@ -174,6 +180,14 @@ class A2PerfVectorEnv(VectorEnv):
         if actions.shape != self._action_shape:
             raise ValueError(f"actions have shape {actions.shape}, expected {self._action_shape}")
         return self._native.step(actions)
+
+    def render(self) -> tuple[Any, ...] | None:
+        """Every environment's frame in ``render_mode``, as a tuple (what Gymnasium's
+        ``SyncVectorEnv`` returns): ``uint8`` arrays ``(H, W, 3)`` for ``"rgb_array"``, ``str``
+        for ``"svg"`` and ``"html"``; ``None`` when ``render_mode`` is ``None``."""
+        if self.render_mode is None:
+            return None
+        return tuple(self._native.render(self.render_mode))
 
     def close_extras(self, **kwargs: Any) -> None:
         """Closes every environment (releasing their Chromium browsers)."""

@@ -843,17 +843,27 @@ impl PyEnv {
         let mut lock = self.core()?;
         let st = lock.as_mut().ok_or_else(closed)?;
         let env = &mut st.core.env;
-        let frame = py.detach(|| guard("render", || env.render(mode).map_err(env_error)))?;
-        match frame {
-            Frame::Rgb {
-                height,
-                width,
-                data,
-            } => Ok(PyArray1::from_vec(py, data)
-                .reshape([height, width, 3])?
-                .into_any()),
-            Frame::Text(text) => Ok(PyString::new(py, &text).into_any()),
-        }
+        let frame = py.detach(|| render_env(env.as_mut(), mode))?;
+        frame_to_py(py, frame)
+    }
+}
+
+/// `env.render(mode)` with a panic turned into an error.
+pub fn render_env(env: &mut dyn Env, mode: &str) -> PyResult<Frame> {
+    guard("render", || env.render(mode).map_err(env_error))
+}
+
+/// A frame as Python gets it: a C-contiguous uint8 array `(height, width, 3)` or a `str`.
+pub fn frame_to_py(py: Python<'_>, frame: Frame) -> PyResult<Bound<'_, PyAny>> {
+    match frame {
+        Frame::Rgb {
+            height,
+            width,
+            data,
+        } => Ok(PyArray1::from_vec(py, data)
+            .reshape([height, width, 3])?
+            .into_any()),
+        Frame::Text(text) => Ok(PyString::new(py, &text).into_any()),
     }
 }
 

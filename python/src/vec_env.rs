@@ -25,7 +25,8 @@ use pyo3::types::{PyDict, PyTuple};
 
 use crate::convert::{ActionSpec, type_name_of};
 use crate::env::{
-    EpisodeCore, IllegalAction, ObsLayout, build_env, env_kwargs, guard_close, spec_to_py,
+    EpisodeCore, IllegalAction, ObsLayout, build_env, env_kwargs, frame_to_py, guard_close,
+    render_env, spec_to_py,
 };
 use crate::errors::guard;
 
@@ -760,6 +761,29 @@ impl PyVecEnv {
             }
             first_err.map_or(Ok(()), Err)
         })
+    }
+
+    /// The modes `render` accepts (every environment's: they share an id).
+    fn render_modes(&self) -> PyResult<Vec<&'static str>> {
+        let st = self.state()?;
+        Ok(st
+            .slots
+            .first()
+            .map(|s| s.core.env.render_modes().to_vec())
+            .unwrap_or_default())
+    }
+
+    /// Every environment's frame in `mode` (as `Env.render`), in order.
+    fn render<'py>(&self, py: Python<'py>, mode: &str) -> PyResult<Vec<Bound<'py, PyAny>>> {
+        let mut st = self.state()?;
+        let slots = &mut st.slots;
+        let frames = py.detach(|| {
+            slots
+                .iter_mut()
+                .map(|s| render_env(s.core.env.as_mut(), mode))
+                .collect::<PyResult<Vec<_>>>()
+        })?;
+        frames.into_iter().map(|f| frame_to_py(py, f)).collect()
     }
 
     /// Whether `close()` was called.

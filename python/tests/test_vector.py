@@ -168,6 +168,42 @@ def test_a_refused_action_steps_no_environment() -> None:
     venv.close()
 
 
+@pytest.mark.parametrize(
+    ("env_id", "params", "mode"),
+    [
+        ("QuadrupedLocomotion-DogPace-v0", {}, "rgb_array"),
+        ("CircuitTraining-Synthetic-Small-v0", {"std_cell_placer": "none"}, "svg"),
+        ("WebNavigation-Difficulty-01-v0", {"num_websites": 3}, "html"),
+    ],
+)
+def test_render_gives_every_environments_frame_as_single_ones_draw_it(
+    env_id: str, params: dict, mode: str
+) -> None:
+    venv = gym.make_vec(
+        f"a2perf/{env_id}", num_envs=2, vectorization_mode="vector_entry_point",
+        render_mode=mode, **params,
+    )
+    assert venv.metadata["render_modes"] == A2PerfEnv(env_id, **params).metadata["render_modes"]
+    singles = [A2PerfEnv(env_id, render_mode=mode, **params) for _ in range(2)]
+    _, infos = venv.reset(seed=4)
+    for i, env in enumerate(singles):
+        env.reset(seed=4 + i)
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        actions = _actions(venv, infos, rng)
+        *_, infos = venv.step(actions)
+        for env, a in zip(singles, actions):
+            env.step(a)
+    frames = venv.render()
+    assert isinstance(frames, tuple) and len(frames) == 2
+    for frame, env in zip(frames, singles):
+        assert _equal(frame, env.render())
+    with pytest.raises(ValueError, match="render modes are"):
+        A2PerfVectorEnv(env_id, num_envs=2, render_mode="human", **params)
+    assert A2PerfVectorEnv(env_id, num_envs=1, **params).render() is None
+    venv.close()
+
+
 def test_same_step_autoreset_reports_the_final_observation() -> None:
     venv = A2PerfVectorEnv(
         "QuadrupedLocomotion-DogPace-v0",
