@@ -30,6 +30,11 @@ def _domain(env_id: str) -> str | None:
     return None
 
 
+def _metadata_of_domain(domain: str | None) -> dict[str, Any]:
+    meta = RENDER_METADATA.get(domain or "", {"render_modes": [], "render_fps": None})
+    return {"render_modes": list(meta["render_modes"]), "render_fps": meta["render_fps"]}
+
+
 def render_metadata(env_id: str) -> dict[str, Any]:
     """``{"render_modes": [...], "render_fps": ...}`` of ``env_id`` (with or without the
     ``a2perf/`` namespace): Gymnasium's ``metadata`` of its environments."""
@@ -37,8 +42,19 @@ def render_metadata(env_id: str) -> dict[str, Any]:
     domain = _domain(bare)
     if domain is None:
         raise gym.error.UnregisteredEnv(f"no a2perf environment {env_id!r}")
-    meta = RENDER_METADATA.get(domain, {"render_modes": [], "render_fps": None})
-    return {"render_modes": list(meta["render_modes"]), "render_fps": meta["render_fps"]}
+    return _metadata_of_domain(domain)
+
+
+def checked_metadata(env_id: str, render_mode: str | None) -> dict[str, Any]:
+    """What an environment's constructor needs before it builds anything: the metadata of
+    ``env_id`` (without namespace), ``render_mode`` checked against it (a bad one must not start
+    a browser first). An unknown id gets no render modes here and no check: building it then
+    raises the registry's error, which names the id with a did-you-mean."""
+    domain = _domain(env_id)
+    meta = _metadata_of_domain(domain)
+    if render_mode is not None and domain is not None:
+        check_render_mode(env_id, render_mode, meta["render_modes"])
+    return meta
 
 
 def check_render_mode(env_id: str, render_mode: str, modes: list[str]) -> None:

@@ -56,7 +56,7 @@ import gymnasium as gym
 import numpy as np
 
 from . import _native
-from ._render import NAMESPACE, RENDER_METADATA, _domain, check_render_mode, render_metadata
+from ._render import NAMESPACE, check_render_mode, checked_metadata, render_metadata
 from .spaces import to_gymnasium
 from .vector import A2PerfVectorEnv
 
@@ -94,10 +94,7 @@ class A2PerfEnv(gym.Env[Any, Any]):
         episode_seeds: tuple[int, int] | None = None,
         **params: Any,
     ) -> None:
-        domain = _domain(env_id)
-        if render_mode is not None and domain is not None:
-            # Checked before building: a bad argument must not start a browser first.
-            check_render_mode(env_id, render_mode, render_metadata(env_id)["render_modes"])
+        meta = checked_metadata(env_id, render_mode)
         self._native = _native.Env(
             env_id,
             params,
@@ -112,10 +109,7 @@ class A2PerfEnv(gym.Env[Any, Any]):
             except ValueError:
                 self._native.close()
                 raise
-        self.metadata = {
-            "render_modes": modes,
-            "render_fps": RENDER_METADATA.get(domain or "", {}).get("render_fps"),
-        }
+        self.metadata = {"render_modes": modes, "render_fps": meta["render_fps"]}
         self.render_mode = render_mode
         spec = self._native.spec()
         self.env_id = env_id

@@ -36,7 +36,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from . import _native
-from ._render import check_render_mode, render_metadata
+from ._render import checked_metadata
 from .spaces import to_gymnasium
 
 _MODES = {AutoresetMode.NEXT_STEP: "next_step", AutoresetMode.SAME_STEP: "same_step"}
@@ -82,10 +82,7 @@ class A2PerfVectorEnv(VectorEnv):
             raise TypeError(f"num_envs must be an integer, got {type(num_envs).__name__}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
-        meta = render_metadata(env_id)
-        if render_mode is not None:
-            # Checked before building: a bad argument must not start browsers first.
-            check_render_mode(env_id, render_mode, meta["render_modes"])
+        meta = checked_metadata(env_id, render_mode)
         mode = AutoresetMode(autoreset_mode)
         if mode not in _MODES:
             raise ValueError(

@@ -266,6 +266,8 @@ def test_seeds_per_environment_and_bad_vector_input() -> None:
         venv.reset(seed=[1, 2, 3])
     with pytest.raises(ValueError, match="at least 1"):
         A2PerfVectorEnv("QuadrupedLocomotion-DogTrot-v0", num_envs=0)
+    with pytest.raises(ValueError, match="did you mean `QuadrupedLocomotion-DogPace-v0`"):
+        A2PerfVectorEnv("QuadrupedLocomotion-DogPac-v0", num_envs=2, render_mode="rgb_array")
     web = A2PerfVectorEnv("WebNavigation-Difficulty-01-v0", num_envs=2)
     web.reset(seed=0)
     with pytest.raises(TypeError, match="integers"):
