@@ -259,6 +259,9 @@ pub struct Report {
     /// The paper's figures beside the tables that match a paper task (`--paper`).
     #[serde(default)]
     pub paper: Vec<paper::PaperComparison>,
+    /// The paper's findings checked on these runs (`--paper` with findings in its tables).
+    #[serde(default)]
+    pub findings: Vec<paper::FindingCheck>,
 }
 
 impl Report {
@@ -1209,6 +1212,7 @@ pub fn build_report_with_paper(
         bootstrap_reps: opts.bootstrap_reps,
         settings: table_settings(&groups),
         paper: Vec::new(),
+        findings: Vec::new(),
     };
     if let Some(tables) = paper {
         report.paper = paper::compare(&report, &groups, tables);

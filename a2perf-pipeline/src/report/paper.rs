@@ -443,6 +443,44 @@ pub struct PaperCell {
     pub source: Option<String>,
     /// Why it is missing, or remarks.
     pub note: Option<String>,
+    /// For return and generalization cells: how our mean stands against the paper's
+    /// (`None` for the other metrics, or when either side is missing).
+    #[serde(default)]
+    pub verdict: Option<Verdict>,
+    /// For a `trails` verdict: the paper's mean minus ours (positive).
+    #[serde(default)]
+    pub gap: Option<f64>,
+}
+
+/// How our mean stands against the paper's `mean ± std`, for metrics where higher is better
+/// (returns, generalization).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Verdict {
+    /// Ours is above the paper's mean.
+    Beats,
+    /// Ours is at or below the paper's mean but within its ± std.
+    Within,
+    /// Ours is below the paper's mean minus its std (or below its mean when it prints no std).
+    Trails,
+}
+
+/// One of the paper's findings, checked on a report's runs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FindingCheck {
+    /// The finding's id (`F1`).
+    pub id: String,
+    /// The claim, as stated in `tables.json`.
+    pub claim: String,
+    /// The paper's numbers the claim rests on.
+    pub paper: String,
+    /// Our numbers, computed from the same cells of our runs.
+    pub ours: String,
+    /// Whether the claim holds on our runs; `None` when our runs lack a cell it needs.
+    pub holds: Option<bool>,
+    /// Why it could not be checked, or remarks.
+    #[serde(default)]
+    pub note: Option<String>,
 }
 
 /// Pairs every table of `report` that matches a paper task with the paper's figures.
@@ -498,6 +536,8 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
                                     ratio,
                                     source: v.source.clone(),
                                     note: v.note.clone(),
+                                    verdict: None,
+                                    gap: None,
                                 }
                             })
                             .collect()
