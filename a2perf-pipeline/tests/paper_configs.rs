@@ -1,6 +1,6 @@
 //! `configs/paper/`: the A2Perf-compatible profile, the paper's eight tasks × three algorithms and
-//! the paper suites. Every file loads and plans; the profile turns on every switch the README's
-//! "Differences from the original A2Perf" table names (read from the README itself, so a switch
+//! the paper suites. Every file loads and plans; the profile turns on every switch docs/differences.md's
+//! tables name (read from that file itself, so a switch
 //! added to the table without the profile fails here); the profile's generalization lists are the
 //! paper's; the suites plan 8 × 3 experiments × 3 seeds with every BC dataset collected inside
 //! the suite.
@@ -277,30 +277,28 @@ fn the_paper_suites_plan_eight_tasks_three_algorithms_three_seeds_with_their_dat
     }
 }
 
-/// One row of a README differences table: its domain and the "reproduce the original" cell.
+/// One row of a differences table (`docs/differences.md`): its domain and the "reproduce the
+/// original" cell.
 struct Row {
     domain: &'static str,
     what: String,
     reproduce: String,
 }
 
-/// The rows of the README's "Differences from the original A2Perf" tables.
-fn readme_rows() -> Vec<Row> {
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
-    let start = readme
-        .find("\n## Differences from the original A2Perf")
-        .expect("README has the differences section");
-    let section = &readme[start + 1..];
-    let end = section[3..].find("\n## ").map_or(section.len(), |i| i + 3);
+/// The rows of the tables of `docs/differences.md`, "Differences from the original A2Perf".
+fn difference_rows() -> Vec<Row> {
+    let path = root().join("docs/differences.md");
+    let doc = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut domain = None;
     let mut rows = Vec::new();
-    for line in section[..end].lines() {
-        if let Some(h) = line.strip_prefix("### ") {
+    for line in doc.lines() {
+        if let Some(h) = line.strip_prefix("## ") {
             domain = Some(match h.trim() {
                 "Chip placement" => "circuit_training",
                 "Quadruped locomotion" => "quadruped_locomotion",
                 "Web navigation" => "web_navigation",
-                other => panic!("README: unknown differences subsection `{other}`"),
+                other => panic!("docs/differences.md: unknown section `{other}`"),
             });
             continue;
         }
@@ -336,7 +334,7 @@ fn switches_in(cell: &str) -> Vec<(String, String)> {
 }
 
 /// Switches of the table the profile leaves out on purpose (profile.ron says why, and the
-/// README row says when to set it).
+/// differences row says when to set it).
 const NOT_IN_PROFILE: [(&str, &str); 1] = [("quadruped_locomotion", "mode")];
 
 #[test]
@@ -344,8 +342,8 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
     let registry = full_registry();
     let profile = profile(&registry);
     let profile_text = std::fs::read_to_string(root().join("configs/paper/profile.ron")).unwrap();
-    let rows = readme_rows();
-    assert!(rows.len() >= 30, "only {} README rows", rows.len());
+    let rows = difference_rows();
+    assert!(rows.len() >= 30, "only {} differences rows", rows.len());
     let mut checked = 0;
     let mut exceptions_seen = Vec::new();
     for row in &rows {
@@ -368,7 +366,7 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
                     assert_eq!(
                         profile.switches_for(entry).get(&param),
                         Some(&spec.default),
-                        "README row `{}`: the profile does not pin `{param}` at its faithful \
+                        "differences row `{}`: the profile does not pin `{param}` at its faithful \
                          default for {}",
                         row.what,
                         entry.id
@@ -407,7 +405,7 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
                 .collect();
             assert!(
                 !declaring.is_empty(),
-                "README row `{}`: no {} environment has a parameter `{param}`",
+                "differences row `{}`: no {} environment has a parameter `{param}`",
                 row.what,
                 row.domain
             );
@@ -424,7 +422,7 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
                     if paper_env {
                         assert!(
                             matches!(switches.get(&param), Some(Value::Str(s)) if !s.is_empty()),
-                            "README row `{}`: the profile gives {} no `{param}`",
+                            "differences row `{}`: the profile gives {} no `{param}`",
                             row.what,
                             entry.id
                         );
@@ -435,11 +433,11 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
                 let want = spec
                     .kind
                     .check(&Value::parse_literal(&value))
-                    .unwrap_or_else(|e| panic!("README `{param} = {value}`: {e}"));
+                    .unwrap_or_else(|e| panic!("differences `{param} = {value}`: {e}"));
                 assert_eq!(
                     switches.get(&param),
                     Some(&want),
-                    "README row `{}`: the profile does not set `{param} = {value}` for {}",
+                    "differences row `{}`: the profile does not set `{param} = {value}` for {}",
                     row.what,
                     entry.id
                 );
@@ -454,7 +452,7 @@ fn the_profile_turns_on_every_switch_of_the_readme_differences_table() {
     for (domain, param) in NOT_IN_PROFILE {
         assert!(
             exceptions_seen.iter().any(|p| p == param),
-            "{domain}.{param} is listed as left out of the profile but no README row names it"
+            "{domain}.{param} is listed as left out of the profile but no differences row names it"
         );
     }
 }

@@ -13,7 +13,7 @@
 //!
 //! A binary that wants the benchmark's pipelines for this algorithm builds a registry with the
 //! built-in domains plus `a2perf_example_custom::register(&mut reg)` and calls
-//! `a2perf_pipeline` (see the README, "Plugging in your own algorithm").
+//! `a2perf_pipeline` (see docs/your-agent.md).
 //!
 //! ```
 //! use a2perf_core::{CancelToken, DiscardCheckpoints, Registry, TrainingContext, TrainingSettings};
