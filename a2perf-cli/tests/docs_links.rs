@@ -112,7 +112,11 @@ fn every_relative_link_and_anchor_resolves() {
     let (mut checked, mut external) = (0, 0);
     for page in &pages {
         let text = std::fs::read_to_string(page).unwrap();
-        let shown = page.strip_prefix(root()).unwrap_or(page).display().to_string();
+        let shown = page
+            .strip_prefix(root())
+            .unwrap_or(page)
+            .display()
+            .to_string();
         for (n, line) in prose_lines(&text) {
             for target in link_targets(&without_code_spans(line)) {
                 if target.contains("://") || target.starts_with("mailto:") {
@@ -160,12 +164,18 @@ fn slugs_follow_github() {
     assert_eq!(slug("[docs](x.md) and more"), "docs-and-more");
     assert_eq!(slug("The `a2perf_rs` package"), "the-a2perf_rs-package");
     let ids = anchors("# A\n## A\n```\n# not a heading\n```\n## B c\n");
-    assert_eq!(ids, BTreeSet::from(["a".into(), "a-1".into(), "b-c".into()]));
+    assert_eq!(
+        ids,
+        BTreeSet::from(["a".into(), "a-1".into(), "b-c".into()])
+    );
 }
 
 #[test]
 fn the_front_page_stays_a_front_page() {
     let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
     let lines = readme.lines().count();
-    assert!(lines <= 300, "README.md has {lines} lines; move detail into docs/");
+    assert!(
+        lines <= 300,
+        "README.md has {lines} lines; move detail into docs/"
+    );
 }

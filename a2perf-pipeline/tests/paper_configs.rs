@@ -288,8 +288,7 @@ struct Row {
 /// The rows of the tables of `docs/differences.md`, "Differences from the original A2Perf".
 fn difference_rows() -> Vec<Row> {
     let path = root().join("docs/differences.md");
-    let doc = std::fs::read_to_string(&path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let doc = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut domain = None;
     let mut rows = Vec::new();
     for line in doc.lines() {
