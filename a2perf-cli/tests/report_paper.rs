@@ -217,8 +217,23 @@ fn report_with_the_paper_shows_columns_ratios_verdicts_findings_and_comparison_j
         "--bootstrap-reps",
         "100",
     ]));
-    assert!(stdout.contains("paper: 1 of the report's tables match"), "{stdout}");
+    assert!(
+        stdout.contains("paper: 1 of the report's tables match"),
+        "{stdout}"
+    );
 
+    // For eyeballing: A2PERF_KEEP_REPORT=DIR keeps a copy of the report.
+    if let Ok(keep) = std::env::var("A2PERF_KEEP_REPORT") {
+        std::fs::create_dir_all(&keep).unwrap();
+        for f in [
+            "report.md",
+            "report.tex",
+            "comparison.json",
+            "paper_comparison.csv",
+        ] {
+            std::fs::copy(out.join(f), Path::new(&keep).join(f)).unwrap();
+        }
+    }
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     let table = section(&md, "## CircuitTraining-Synthetic-Small-v0 (");
     // The paper columns, with the verdicts.
@@ -250,7 +265,10 @@ fn report_with_the_paper_shows_columns_ratios_verdicts_findings_and_comparison_j
         "{table}"
     );
     // Units that differ are converted and labelled.
-    assert!(table.contains("0.5 ± 0.25 GiB; GiB → GB (×1.073742)"), "{table}");
+    assert!(
+        table.contains("0.5 ± 0.25 GiB; GiB → GB (×1.073742)"),
+        "{table}"
+    );
     assert!(table.contains("s → ms (×1000)"), "{table}");
     let inference_row = table
         .lines()
@@ -288,7 +306,11 @@ fn report_with_the_paper_shows_columns_ratios_verdicts_findings_and_comparison_j
     let tex = std::fs::read_to_string(out.join("report.tex")).unwrap();
     assert!(tex.contains("(trails by 1.00)") && tex.contains("tab:paper-findings"));
     let csv = std::fs::read_to_string(out.join("paper_comparison.csv")).unwrap();
-    assert!(csv.lines().any(|l| l.contains(",bc,returns,") && l.contains(",trails,1,")), "{csv}");
+    assert!(
+        csv.lines()
+            .any(|l| l.contains(",bc,returns,") && l.contains(",trails,1,")),
+        "{csv}"
+    );
 
     // comparison.json: the paper's names, both means in the paper's unit, the verdicts.
     let cmp = read(&out.join("comparison.json"));
@@ -308,16 +330,25 @@ fn report_with_the_paper_shows_columns_ratios_verdicts_findings_and_comparison_j
     assert!((ours - 1.0).abs() < 1e-12, "1 GiB in GiB: {ours}");
     assert!((ram["ratio"].as_f64().unwrap() - 2.0).abs() < 1e-12);
     let time = find("small_macro", "ppo", "Inference Time");
-    assert_eq!((&time["phase"], &time["unit"]), (&json!("inference"), &json!("s")));
+    assert_eq!(
+        (&time["phase"], &time["unit"]),
+        (&json!("inference"), &json!("s"))
+    );
     assert!((time["ours_mean"].as_f64().unwrap() - 3e-5).abs() < 1e-15);
     for (algorithm, verdict) in [("ppo", "beats"), ("ddqn", "within"), ("bc", "trails")] {
         let c = find("small_macro", algorithm, "Returns");
         assert_eq!(c["verdict"], verdict, "{algorithm}");
     }
     let sac = find("small_macro", "sac", "Returns");
-    assert_eq!((&sac["ours_mean"], &sac["verdict"]), (&Value::Null, &Value::Null));
+    assert_eq!(
+        (&sac["ours_mean"], &sac["verdict"]),
+        (&Value::Null, &Value::Null)
+    );
     assert_eq!(sac["ours_note"], "no sac runs on this task");
-    assert_eq!(find("other_netlist", "ppo", "Returns")["ours_mean"], Value::Null);
+    assert_eq!(
+        find("other_netlist", "ppo", "Returns")["ours_mean"],
+        Value::Null
+    );
     let outcomes: Vec<(&Value, &Value)> = cmp["findings"]
         .as_array()
         .unwrap()

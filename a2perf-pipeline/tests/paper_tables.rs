@@ -113,7 +113,10 @@ fn every_paper_value_equals_the_shared_transcription_and_none_is_extra() {
     let extra: Vec<&CellKey> = ours.difference(&theirs).collect();
     assert!(extra.is_empty(), "cells not in the paper: {extra:?}");
     assert_eq!(ours.len(), theirs.len());
-    assert_eq!(tables.tasks.len(), shared["tasks"].as_array().unwrap().len());
+    assert_eq!(
+        tables.tasks.len(),
+        shared["tasks"].as_array().unwrap().len()
+    );
 }
 
 #[test]
@@ -128,8 +131,14 @@ fn every_finding_holds_on_the_papers_own_figures_with_the_papers_numbers() {
         ("F2", &["0.11 / 48.28"]),
         ("F3", &["-1.10 ± 0.04 vs -1.13 ± 0.04"]),
         ("F4", &["2305.57 / 2.19"]),
-        ("F5", &["120.00 + 68.00 = 188.00 < 273.00", "110.00 + 68.00"]),
-        ("F6", &["0.01 < 0.05", "(×5.00)", "-1.01 > -1.25", "(×1.24)"]),
+        (
+            "F5",
+            &["120.00 + 68.00 = 188.00 < 273.00", "110.00 + 68.00"],
+        ),
+        (
+            "F6",
+            &["0.01 < 0.05", "(×5.00)", "-1.01 > -1.25", "(×1.24)"],
+        ),
         ("F7", &["9.94 ± 15.59 vs 6.96 ± 6.72"]),
         ("F8", &["5.81 < 10.19", "13.00 < 25.82"]),
         ("F9", &["1.69 > 0.46", "(×3.67)", "4.80 < 8.76"]),

@@ -607,8 +607,13 @@ fn the_shipped_tables_hold_the_papers_eight_tasks() {
                 // Every cell names its table and row and keeps the paper's name and phase; a
                 // missing figure is the paper's N/A, with the reason.
                 assert!(v.source.is_some(), "{id}/{algo}/{key}");
-                assert!(v.paper_metric.is_some() && v.phase.is_some(), "{id}/{algo}/{key}");
-                assert!(v.mean.is_some() || v.note.as_deref().is_some_and(|n| n.starts_with("N/A")));
+                assert!(
+                    v.paper_metric.is_some() && v.phase.is_some(),
+                    "{id}/{algo}/{key}"
+                );
+                assert!(
+                    v.mean.is_some() || v.note.as_deref().is_some_and(|n| n.starts_with("N/A"))
+                );
             }
         }
     }

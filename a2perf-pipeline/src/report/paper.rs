@@ -214,7 +214,10 @@ fn report_unit(dim: Dimension, key: &str) -> &'static str {
 
 /// The dimension of metric `key` (`None` when unitless or unknown).
 fn dimension_of(key: &str) -> Option<Dimension> {
-    METRICS.iter().find(|(k, _)| *k == key).and_then(|(_, d)| *d)
+    METRICS
+        .iter()
+        .find(|(k, _)| *k == key)
+        .and_then(|(_, d)| *d)
 }
 
 fn units_of(dim: Dimension) -> &'static str {
@@ -333,7 +336,10 @@ impl PaperTables {
             if !ids.insert(f.id.as_str()) {
                 return Err(format!("finding `{}` is listed twice", f.id));
             }
-            for cell in f.cells().map_err(|why| format!("finding `{}`: {why}", f.id))? {
+            for cell in f
+                .cells()
+                .map_err(|why| format!("finding `{}`: {why}", f.id))?
+            {
                 if self.value(&cell).is_none() {
                     return Err(format!(
                         "finding `{}`: cell `{cell}` is not in the tables",
@@ -435,7 +441,11 @@ impl PaperValue {
                 Phase::of_key(key).as_str()
             ));
         }
-        if self.paper_metric.as_deref().is_some_and(|m| m.trim().is_empty()) {
+        if self
+            .paper_metric
+            .as_deref()
+            .is_some_and(|m| m.trim().is_empty())
+        {
             return Err("empty `paper_metric`".into());
         }
         Ok(())
@@ -671,15 +681,17 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
                                         (true, Some(ours), Some(p)) if p != 0.0 => Some(ours / p),
                                         _ => None,
                                     };
-                                let (verdict, gap) =
-                                    match (VERDICT_METRICS.contains(&m.key.as_str()), m.mean, c.mean)
-                                    {
-                                        (true, Some(ours), Some(p)) => {
-                                            let (v, gap) = Verdict::judge(ours, p, c.std);
-                                            (Some(v), gap)
-                                        }
-                                        _ => (None, None),
-                                    };
+                                let (verdict, gap) = match (
+                                    VERDICT_METRICS.contains(&m.key.as_str()),
+                                    m.mean,
+                                    c.mean,
+                                ) {
+                                    (true, Some(ours), Some(p)) => {
+                                        let (v, gap) = Verdict::judge(ours, p, c.std);
+                                        (Some(v), gap)
+                                    }
+                                    _ => (None, None),
+                                };
                                 PaperCell {
                                     key: m.key.clone(),
                                     mean: c.mean,
@@ -744,10 +756,7 @@ impl CellSource for PaperSide<'_> {
         };
         match c.mean {
             Some(mean) => Ok(CellValue { mean, std: c.std }),
-            None => Err(v
-                .note
-                .clone()
-                .unwrap_or_else(|| "not published".into())),
+            None => Err(v.note.clone().unwrap_or_else(|| "not published".into())),
         }
     }
 
@@ -767,8 +776,12 @@ fn finding_unit(key: &str) -> String {
 /// metric of the report table that matches paper task `task`, column of algorithm `algorithm`
 /// (our registered name).
 pub struct OursSide<'a> {
-    groups: BTreeMap<(String, String), std::result::Result<(&'a super::GroupReport, usize), String>>,
+    /// (paper task, algorithm) → the group and its number of runs, or why there is none.
+    groups: BTreeMap<(String, String), std::result::Result<RanGroup<'a>, String>>,
 }
+
+/// A report group and its number of runs.
+type RanGroup<'a> = (&'a super::GroupReport, usize);
 
 impl<'a> OursSide<'a> {
     /// Pairs every (paper task, algorithm) with the report group that ran it.
@@ -801,11 +814,7 @@ impl<'a> OursSide<'a> {
     }
 
     /// The report group of `algorithm` on paper task `task`, and its number of runs.
-    pub fn group(
-        &self,
-        task: &str,
-        algorithm: &str,
-    ) -> std::result::Result<(&'a super::GroupReport, usize), String> {
+    pub fn group(&self, task: &str, algorithm: &str) -> std::result::Result<RanGroup<'a>, String> {
         match self.groups.get(&(task.to_string(), algorithm.to_string())) {
             Some(found) => found.clone(),
             None => Err(format!("no {algorithm} runs on this task")),
@@ -844,7 +853,11 @@ impl CellSource for OursSide<'_> {
 }
 
 /// Checks every finding of `tables` on the report's runs (and on the paper's own figures).
-pub fn check_findings(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<FindingCheck> {
+pub fn check_findings(
+    report: &Report,
+    groups: &[Group],
+    tables: &PaperTables,
+) -> Vec<FindingCheck> {
     let ours = OursSide::new(report, groups, tables);
     let paper = PaperSide(tables);
     tables
@@ -855,7 +868,10 @@ pub fn check_findings(report: &Report, groups: &[Group], tables: &PaperTables) -
             let on_ours = f.evaluate(&ours);
             let mut notes: Vec<String> = f.note.iter().cloned().collect();
             if !on_ours.missing.is_empty() {
-                notes.push(format!("missing in our runs: {}", on_ours.missing.join("; ")));
+                notes.push(format!(
+                    "missing in our runs: {}",
+                    on_ours.missing.join("; ")
+                ));
             }
             if on_paper.holds != Some(true) {
                 notes.push(format!(

@@ -293,10 +293,9 @@ impl Condition {
                 };
                 let (va, vb) = (value(a, missing), value(b, missing));
                 let show = |v: Option<CellValue>| match v {
-                    Some(CellValue {
-                        mean,
-                        std: Some(s),
-                    }) => format!("{} ± {}", format_value(mean), format_value(s)),
+                    Some(CellValue { mean, std: Some(s) }) => {
+                        format!("{} ± {}", format_value(mean), format_value(s))
+                    }
                     Some(v) => format_value(v.mean),
                     None => "—".into(),
                 };
@@ -511,7 +510,11 @@ mod tests {
         ]);
         let e = f.evaluate(&ours);
         assert_eq!(e.holds, Some(false));
-        assert!(e.text.starts_with("200.00 + 1.00 = 201.00 > 120.00 kWh"), "{}", e.text);
+        assert!(
+            e.text.starts_with("200.00 + 1.00 = 201.00 > 120.00 kWh"),
+            "{}",
+            e.text
+        );
     }
 
     #[test]
@@ -543,10 +546,16 @@ mod tests {
         let f = finding(
             r#"{"id": "F7", "claim": "c", "holds_when": {"overlap": [{"cell": "t/a/r"}, {"cell": "t/b/r"}]}}"#,
         );
-        let e = f.evaluate(&table(&[("t/a/r", 9.94, Some(15.59)), ("t/b/r", 6.96, Some(6.72))]));
+        let e = f.evaluate(&table(&[
+            ("t/a/r", 9.94, Some(15.59)),
+            ("t/b/r", 6.96, Some(6.72)),
+        ]));
         assert_eq!(e.holds, Some(true));
         assert_eq!(e.text, "9.94 ± 15.59 vs 6.96 ± 6.72: gap 2.98 ≤ 22.31");
-        let e = f.evaluate(&table(&[("t/a/r", -0.99, Some(0.01)), ("t/b/r", -1.1, Some(0.04))]));
+        let e = f.evaluate(&table(&[
+            ("t/a/r", -0.99, Some(0.01)),
+            ("t/b/r", -1.1, Some(0.04)),
+        ]));
         assert_eq!(e.holds, Some(false));
         let e = f.evaluate(&table(&[("t/a/r", 1.0, None), ("t/b/r", 1.0, Some(0.1))]));
         assert_eq!(e.holds, None);
@@ -556,9 +565,15 @@ mod tests {
             r#"{"id": "F4", "claim": "c", "holds_when": {"ratio": {"of": [{"cell": "t/a/p"}, {"cell": "t/a/q"}], "at_least": 10}}}"#,
         );
         let e = r.evaluate(&table(&[("t/a/p", 2305.57, None), ("t/a/q", 2.19, None)]));
-        assert_eq!((e.holds, e.text.as_str()), (Some(true), "2305.57 / 2.19 = 1.05e3 ≥ 10.00"));
+        assert_eq!(
+            (e.holds, e.text.as_str()),
+            (Some(true), "2305.57 / 2.19 = 1.05e3 ≥ 10.00")
+        );
         let e = r.evaluate(&table(&[("t/a/p", 0.5, None), ("t/a/q", 0.25, None)]));
-        assert_eq!((e.holds, e.text.as_str()), (Some(false), "0.50 / 0.25 = 2.00 < 10.00"));
+        assert_eq!(
+            (e.holds, e.text.as_str()),
+            (Some(false), "0.50 / 0.25 = 2.00 < 10.00")
+        );
     }
 
     #[test]
@@ -583,7 +598,10 @@ mod tests {
         ] {
             let def: FindingDef = serde_json::from_str(json).unwrap();
             let err = def.check().unwrap_err();
-            assert!(err.starts_with("finding `F`: ") && err.contains(want), "{err}");
+            assert!(
+                err.starts_with("finding `F`: ") && err.contains(want),
+                "{err}"
+            );
         }
     }
 }

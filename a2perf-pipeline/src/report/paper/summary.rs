@@ -12,7 +12,7 @@ use super::{OursSide, PaperSide, PaperTables, Phase, VERDICT_METRICS, Verdict, f
 /// The file `a2perf report --paper` writes as `comparison.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ComparisonFile {
-    /// One entry per cell of the paper's tables, in the tables' order.
+    /// One entry per cell of the paper's tables: task by task, then by algorithm and metric key.
     pub cells: Vec<ComparisonCell>,
     /// One entry per finding.
     pub findings: Vec<FindingOutcome>,
@@ -128,13 +128,19 @@ pub fn comparison(report: &Report, groups: &[Group], tables: &PaperTables) -> Co
                 };
                 let paper_mean = theirs.and_then(|c| scale(c.mean));
                 let paper_std = theirs.and_then(|c| c.std.and_then(scale));
-                let verdict = match (VERDICT_METRICS.contains(&key.as_str()), ours_mean, paper_mean)
-                {
+                let verdict = match (
+                    VERDICT_METRICS.contains(&key.as_str()),
+                    ours_mean,
+                    paper_mean,
+                ) {
                     (true, Some(o), Some(p)) => Some(Verdict::judge(o, p, paper_std).0),
                     _ => None,
                 };
-                let ratio = match (super::RATIO_METRICS.contains(&key.as_str()), ours_mean, paper_mean)
-                {
+                let ratio = match (
+                    super::RATIO_METRICS.contains(&key.as_str()),
+                    ours_mean,
+                    paper_mean,
+                ) {
                     (true, Some(o), Some(p)) if p != 0.0 => Some(o / p),
                     _ => None,
                 };
@@ -180,8 +186,8 @@ pub fn comparison(report: &Report, groups: &[Group], tables: &PaperTables) -> Co
     let mut suite = totals(groups);
     suite.paper_energy_kwh_same_runs = paper_energy;
     suite.ours_energy_kwh_same_runs = ours_energy;
-    suite.energy_ratio_same_runs = (matched_energy && paper_energy != 0.0)
-        .then_some(ours_energy / paper_energy);
+    suite.energy_ratio_same_runs =
+        (matched_energy && paper_energy != 0.0).then_some(ours_energy / paper_energy);
     ComparisonFile {
         cells,
         findings,
