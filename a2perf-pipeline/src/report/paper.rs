@@ -577,6 +577,30 @@ pub struct PaperCell {
 /// Metrics that get a verdict: higher is better, and the paper's ± is a spread over seeds.
 pub const VERDICT_METRICS: &[&str] = &["returns", "generalization"];
 
+/// Ours / paper for the metrics of [`RATIO_METRICS`], when both are known.
+fn ratio_of(key: &str, ours: Option<f64>, paper: Option<f64>) -> Option<f64> {
+    match (RATIO_METRICS.contains(&key), ours, paper) {
+        (true, Some(o), Some(p)) if p != 0.0 => Some(o / p),
+        _ => None,
+    }
+}
+
+/// The verdict (and gap) for the metrics of [`VERDICT_METRICS`], when both means are known.
+fn verdict_of(
+    key: &str,
+    ours: Option<f64>,
+    paper_mean: Option<f64>,
+    paper_std: Option<f64>,
+) -> (Option<Verdict>, Option<f64>) {
+    match (VERDICT_METRICS.contains(&key), ours, paper_mean) {
+        (true, Some(o), Some(p)) => {
+            let (v, gap) = Verdict::judge(o, p, paper_std);
+            (Some(v), gap)
+        }
+        _ => (None, None),
+    }
+}
+
 impl Verdict {
     /// How `ours` stands against the paper's `mean ± std`, with the gap when it trails.
     ///
@@ -675,23 +699,8 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
                             .filter_map(|m| metrics.get(&m.key).map(|v| (m, v)))
                             .map(|(m, v)| {
                                 let c = v.in_unit(&m.unit);
-                                let ratio =
-                                    match (RATIO_METRICS.contains(&m.key.as_str()), m.mean, c.mean)
-                                    {
-                                        (true, Some(ours), Some(p)) if p != 0.0 => Some(ours / p),
-                                        _ => None,
-                                    };
-                                let (verdict, gap) = match (
-                                    VERDICT_METRICS.contains(&m.key.as_str()),
-                                    m.mean,
-                                    c.mean,
-                                ) {
-                                    (true, Some(ours), Some(p)) => {
-                                        let (v, gap) = Verdict::judge(ours, p, c.std);
-                                        (Some(v), gap)
-                                    }
-                                    _ => (None, None),
-                                };
+                                let ratio = ratio_of(&m.key, m.mean, c.mean);
+                                let (verdict, gap) = verdict_of(&m.key, m.mean, c.mean, c.std);
                                 PaperCell {
                                     key: m.key.clone(),
                                     mean: c.mean,

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::super::{ENERGY_NAMES, Group, PEAK_RAM_NAMES, Report, meter_value};
 use super::findings::{CellRef, CellSource};
-use super::{OursSide, PaperSide, PaperTables, Phase, VERDICT_METRICS, Verdict, finding_unit};
+use super::{OursSide, PaperSide, PaperTables, Phase, Verdict, finding_unit, ratio_of, verdict_of};
 
 /// The file `a2perf report --paper` writes as `comparison.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -128,22 +128,8 @@ pub fn comparison(report: &Report, groups: &[Group], tables: &PaperTables) -> Co
                 };
                 let paper_mean = theirs.and_then(|c| scale(c.mean));
                 let paper_std = theirs.and_then(|c| c.std.and_then(scale));
-                let verdict = match (
-                    VERDICT_METRICS.contains(&key.as_str()),
-                    ours_mean,
-                    paper_mean,
-                ) {
-                    (true, Some(o), Some(p)) => Some(Verdict::judge(o, p, paper_std).0),
-                    _ => None,
-                };
-                let ratio = match (
-                    super::RATIO_METRICS.contains(&key.as_str()),
-                    ours_mean,
-                    paper_mean,
-                ) {
-                    (true, Some(o), Some(p)) if p != 0.0 => Some(o / p),
-                    _ => None,
-                };
+                let verdict = verdict_of(key, ours_mean, paper_mean, paper_std).0;
+                let ratio = ratio_of(key, ours_mean, paper_mean);
                 if key == "energy"
                     && let (Ok((gr, runs)), Some(p)) = (ours.group(&task.id, algorithm), theirs)
                 {
