@@ -98,8 +98,9 @@ pub struct ReportArgs {
     #[arg(long)]
     pub bootstrap_reps: Option<usize>,
     /// The paper's tables (e.g. docs/paper/tables.json): adds the paper's column beside ours
-    /// under every table whose task matches, and the ratio ours / paper for energy, RAM and
-    /// wall-clock time.
+    /// under every table whose task matches, with a verdict on returns and generalization and
+    /// the ratio ours / paper for energy, RAM and wall-clock time; checks the paper's findings
+    /// on the runs; writes comparison.json.
     #[arg(long, value_name = "TABLES_JSON")]
     pub paper: Option<PathBuf>,
 }

@@ -1216,6 +1216,7 @@ pub fn build_report_with_paper(
     };
     if let Some(tables) = paper {
         report.paper = paper::compare(&report, &groups, tables);
+        report.findings = paper::check_findings(&report, &groups, tables);
     }
     Ok((report, groups))
 }
@@ -1229,7 +1230,9 @@ pub fn write_report(dirs: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resul
 }
 
 /// [`write_report`], with the paper's figures beside every table that matches a task of
-/// `paper`; `paper_comparison.csv` lists them one row per (task, algorithm, metric).
+/// `paper`; `paper_comparison.csv` lists them one row per (task, algorithm, metric), and
+/// `comparison.json` every cell of the paper's tables beside ours, the findings' outcomes and
+/// the runs' totals ([`paper::summary::ComparisonFile`]).
 pub fn write_report_with_paper(
     dirs: &[PathBuf],
     out: &Path,
@@ -1247,8 +1250,12 @@ pub fn write_report_with_paper(
     write("metrics.csv", &render::csv(&report))?;
     write("curves.csv", &render::curves_csv(&groups))?;
     write("scores.csv", &render::scores_csv(&report))?;
-    if paper.is_some() {
+    if let Some(tables) = paper {
         write("paper_comparison.csv", &render::paper_csv(&report))?;
+        a2perf_core::write_json_atomic(
+            &out.join("comparison.json"),
+            &paper::summary::comparison(&report, &groups, tables),
+        )?;
     }
     a2perf_core::write_json_atomic(&out.join("report.json"), &report)?;
     a2perf_core::write_json_atomic(

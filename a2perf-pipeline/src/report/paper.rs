@@ -38,8 +38,16 @@ use serde::{Deserialize, Serialize};
 use super::{Group, Report};
 use crate::{PipelineError, Result};
 
-/// The schema tag `tables.json` must carry.
-pub const SCHEMA: &str = "a2perf-paper-tables/1";
+pub mod findings;
+pub mod summary;
+
+use findings::{CellRef, CellSource, CellValue, FindingDef};
+
+/// The schema tag `tables.json` files are written with.
+pub const SCHEMA: &str = "a2perf-paper-tables/2";
+
+/// The schema tags this version reads: `/1` files have no findings and no paper names per cell.
+pub const SCHEMAS_READ: &[&str] = &["a2perf-paper-tables/1", SCHEMA];
 
 /// `tables.json`: the paper's task tables.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -51,6 +59,9 @@ pub struct PaperTables {
     pub paper: PaperInfo,
     /// One entry per task table of the paper.
     pub tasks: Vec<PaperTask>,
+    /// The paper's findings, each with a definition over the tables' cells.
+    #[serde(default)]
+    pub findings: Vec<FindingDef>,
 }
 
 /// The paper a `tables.json` transcribes.
@@ -116,6 +127,42 @@ pub struct PaperValue {
     /// Why it is missing, or anything else a reader must know.
     #[serde(default)]
     pub note: Option<String>,
+    /// The metric's name as the paper prints it (`Peak RAM Usage`).
+    #[serde(default)]
+    pub paper_metric: Option<String>,
+    /// The phase the paper lists it under.
+    #[serde(default)]
+    pub phase: Option<Phase>,
+}
+
+/// The two halves of each of the paper's tables.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Phase {
+    /// Data cost, application, training reliability and training system metrics.
+    Training,
+    /// Rollout reliability and inference system metrics.
+    Inference,
+}
+
+impl Phase {
+    /// The phase a metric key of our report belongs to in the paper's layout (returns and
+    /// generalization are listed under training, though we roll them out after it).
+    pub fn of_key(key: &str) -> Phase {
+        if key.starts_with("inference_") || key.ends_with("_rollouts") {
+            Phase::Inference
+        } else {
+            Phase::Training
+        }
+    }
+
+    /// `training` or `inference`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Phase::Training => "training",
+            Phase::Inference => "inference",
+        }
+    }
 }
 
 /// What a unit measures.
@@ -152,6 +199,25 @@ fn unit_scale(unit: &str) -> Option<(Dimension, f64)> {
         "h" | "hours" | "Hours" => (Time, 3600.0),
         _ => return None,
     })
+}
+
+/// The unit our report gives a dimension in; findings compute in it.
+fn report_unit(dim: Dimension, key: &str) -> &'static str {
+    match dim {
+        Dimension::Energy => "kWh",
+        Dimension::Power => "W",
+        Dimension::Memory => "GB",
+        Dimension::Time if key == "wall_clock" => "Hours",
+        Dimension::Time => "ms",
+    }
+}
+
+/// The dimension of metric `key` (`None` when unitless or unknown).
+fn dimension_of(key: &str) -> Option<Dimension> {
+    METRICS
+        .iter()
+        .find(|(k, _)| *k == key)
+        .and_then(|(_, d)| *d)
 }
 
 fn units_of(dim: Dimension) -> &'static str {
@@ -222,10 +288,11 @@ impl PaperTables {
 
     /// The structural rules of the format (see `docs/paper/README.md`).
     fn check(&self) -> std::result::Result<(), String> {
-        if self.schema != SCHEMA {
+        if !SCHEMAS_READ.contains(&self.schema.as_str()) {
             return Err(format!(
-                "schema `{}` is not supported (expected `{SCHEMA}`)",
-                self.schema
+                "schema `{}` is not supported (expected one of `{}`)",
+                self.schema,
+                SCHEMAS_READ.join("`, `")
             ));
         }
         if self.tasks.is_empty() {
@@ -258,7 +325,40 @@ impl PaperTables {
                 }
             }
         }
+        self.check_findings()
+    }
+
+    /// Findings have unique ids and read only cells the tables have.
+    fn check_findings(&self) -> std::result::Result<(), String> {
+        let mut ids = BTreeSet::new();
+        for f in &self.findings {
+            f.check()?;
+            if !ids.insert(f.id.as_str()) {
+                return Err(format!("finding `{}` is listed twice", f.id));
+            }
+            for cell in f
+                .cells()
+                .map_err(|why| format!("finding `{}`: {why}", f.id))?
+            {
+                if self.value(&cell).is_none() {
+                    return Err(format!(
+                        "finding `{}`: cell `{cell}` is not in the tables",
+                        f.id
+                    ));
+                }
+            }
+        }
         Ok(())
+    }
+
+    /// The published value of `cell`.
+    pub fn value(&self, cell: &CellRef) -> Option<&PaperValue> {
+        self.tasks
+            .iter()
+            .find(|t| t.id == cell.task)?
+            .algorithms
+            .get(&cell.algorithm)?
+            .get(&cell.metric)
     }
 
     /// The task table a run on `env_id` with resolved `params` belongs to.
@@ -331,6 +431,22 @@ impl PaperValue {
         }
         if self.mean.is_none() && self.note.as_deref().is_none_or(|s| s.trim().is_empty()) {
             return Err("a missing value (`mean: null`) needs a `note` saying why".into());
+        }
+        if let Some(phase) = self.phase
+            && phase != Phase::of_key(key)
+        {
+            return Err(format!(
+                "`phase` is `{}` but this metric is a {} metric",
+                phase.as_str(),
+                Phase::of_key(key).as_str()
+            ));
+        }
+        if self
+            .paper_metric
+            .as_deref()
+            .is_some_and(|m| m.trim().is_empty())
+        {
+            return Err("empty `paper_metric`".into());
         }
         Ok(())
     }
@@ -450,6 +566,69 @@ pub struct PaperCell {
     /// For a `trails` verdict: the paper's mean minus ours (positive).
     #[serde(default)]
     pub gap: Option<f64>,
+    /// The metric's name as the paper prints it, when `tables.json` gives it.
+    #[serde(default)]
+    pub paper_metric: Option<String>,
+    /// The phase the paper lists the metric under.
+    #[serde(default)]
+    pub phase: Option<Phase>,
+}
+
+/// Metrics that get a verdict: higher is better, and the paper's ± is a spread over seeds.
+pub const VERDICT_METRICS: &[&str] = &["returns", "generalization"];
+
+/// Ours / paper for the metrics of [`RATIO_METRICS`], when both are known.
+fn ratio_of(key: &str, ours: Option<f64>, paper: Option<f64>) -> Option<f64> {
+    match (RATIO_METRICS.contains(&key), ours, paper) {
+        (true, Some(o), Some(p)) if p != 0.0 => Some(o / p),
+        _ => None,
+    }
+}
+
+/// The verdict (and gap) for the metrics of [`VERDICT_METRICS`], when both means are known.
+fn verdict_of(
+    key: &str,
+    ours: Option<f64>,
+    paper_mean: Option<f64>,
+    paper_std: Option<f64>,
+) -> (Option<Verdict>, Option<f64>) {
+    match (VERDICT_METRICS.contains(&key), ours, paper_mean) {
+        (true, Some(o), Some(p)) => {
+            let (v, gap) = Verdict::judge(o, p, paper_std);
+            (Some(v), gap)
+        }
+        _ => (None, None),
+    }
+}
+
+impl Verdict {
+    /// How `ours` stands against the paper's `mean ± std`, with the gap when it trails.
+    ///
+    /// ```
+    /// use a2perf_pipeline::report::paper::Verdict;
+    /// assert_eq!(Verdict::judge(1.2, 1.0, Some(0.5)), (Verdict::Beats, None));
+    /// assert_eq!(Verdict::judge(0.6, 1.0, Some(0.5)), (Verdict::Within, None));
+    /// assert_eq!(Verdict::judge(0.25, 1.0, Some(0.5)), (Verdict::Trails, Some(0.75)));
+    /// assert_eq!(Verdict::judge(0.9, 1.0, None).0, Verdict::Trails);
+    /// ```
+    pub fn judge(ours: f64, paper_mean: f64, paper_std: Option<f64>) -> (Verdict, Option<f64>) {
+        if ours > paper_mean {
+            (Verdict::Beats, None)
+        } else if ours >= paper_mean - paper_std.unwrap_or(0.0) {
+            (Verdict::Within, None)
+        } else {
+            (Verdict::Trails, Some(paper_mean - ours))
+        }
+    }
+
+    /// `beats`, `within` or `trails`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Verdict::Beats => "beats",
+            Verdict::Within => "within",
+            Verdict::Trails => "trails",
+        }
+    }
 }
 
 /// How our mean stands against the paper's `mean ± std`, for metrics where higher is better
@@ -481,6 +660,10 @@ pub struct FindingCheck {
     /// Why it could not be checked, or remarks.
     #[serde(default)]
     pub note: Option<String>,
+    /// Whether the definition holds on the paper's own figures (a check of the definition:
+    /// `false` means it does not capture the claim as the paper's numbers show it).
+    #[serde(default)]
+    pub paper_holds: Option<bool>,
 }
 
 /// Pairs every table of `report` that matches a paper task with the paper's figures.
@@ -516,12 +699,8 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
                             .filter_map(|m| metrics.get(&m.key).map(|v| (m, v)))
                             .map(|(m, v)| {
                                 let c = v.in_unit(&m.unit);
-                                let ratio =
-                                    match (RATIO_METRICS.contains(&m.key.as_str()), m.mean, c.mean)
-                                    {
-                                        (true, Some(ours), Some(p)) if p != 0.0 => Some(ours / p),
-                                        _ => None,
-                                    };
+                                let ratio = ratio_of(&m.key, m.mean, c.mean);
+                                let (verdict, gap) = verdict_of(&m.key, m.mean, c.mean, c.std);
                                 PaperCell {
                                     key: m.key.clone(),
                                     mean: c.mean,
@@ -536,8 +715,10 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
                                     ratio,
                                     source: v.source.clone(),
                                     note: v.note.clone(),
-                                    verdict: None,
-                                    gap: None,
+                                    verdict,
+                                    gap,
+                                    paper_metric: v.paper_metric.clone(),
+                                    phase: v.phase,
                                 }
                             })
                             .collect()
@@ -569,6 +750,161 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
     out
 }
 
+/// The paper's figures as a side findings are evaluated on, in our report's units.
+pub struct PaperSide<'a>(pub &'a PaperTables);
+
+impl CellSource for PaperSide<'_> {
+    fn value(&self, cell: &CellRef) -> std::result::Result<CellValue, String> {
+        let v = self
+            .0
+            .value(cell)
+            .ok_or_else(|| "not in the paper's tables".to_string())?;
+        let c = match dimension_of(&cell.metric) {
+            Some(dim) => v.in_unit(report_unit(dim, &cell.metric)),
+            None => v.in_unit(&v.unit),
+        };
+        match c.mean {
+            Some(mean) => Ok(CellValue { mean, std: c.std }),
+            None => Err(v.note.clone().unwrap_or_else(|| "not published".into())),
+        }
+    }
+
+    fn unit(&self, cell: &CellRef) -> String {
+        finding_unit(&cell.metric)
+    }
+}
+
+/// The unit findings compute metric `key` in (empty when unitless).
+fn finding_unit(key: &str) -> String {
+    dimension_of(key)
+        .map(|d| report_unit(d, key).to_string())
+        .unwrap_or_default()
+}
+
+/// A report's runs as a side findings are evaluated on: a cell `task/algorithm/metric` is the
+/// metric of the report table that matches paper task `task`, column of algorithm `algorithm`
+/// (our registered name).
+pub struct OursSide<'a> {
+    /// (paper task, algorithm) → the group and its number of runs, or why there is none.
+    groups: BTreeMap<(String, String), std::result::Result<RanGroup<'a>, String>>,
+}
+
+/// A report group and its number of runs.
+type RanGroup<'a> = (&'a super::GroupReport, usize);
+
+impl<'a> OursSide<'a> {
+    /// Pairs every (paper task, algorithm) with the report group that ran it.
+    pub fn new(report: &'a Report, groups: &[Group], tables: &PaperTables) -> Self {
+        let mut out = BTreeMap::new();
+        for (gr, g) in report.groups.iter().zip(groups) {
+            let Some(first) = g.runs.first() else {
+                continue;
+            };
+            let record = &first.run.record;
+            let Some(task) = tables.matching(&record.task.env_id, &record.task.env_params) else {
+                continue;
+            };
+            let key = (task.id.clone(), record.algorithm.name.clone());
+            match out.get(&key) {
+                None => {
+                    out.insert(key, Ok((gr, g.runs.len())));
+                }
+                Some(Ok((other, _))) => {
+                    let why = format!(
+                        "two report columns run {} on it ({} and {}); compare them one at a time",
+                        record.algorithm.name, other.algorithm, gr.algorithm
+                    );
+                    out.insert(key, Err(why));
+                }
+                Some(Err(_)) => {}
+            }
+        }
+        Self { groups: out }
+    }
+
+    /// The report group of `algorithm` on paper task `task`, and its number of runs.
+    pub fn group(&self, task: &str, algorithm: &str) -> std::result::Result<RanGroup<'a>, String> {
+        match self.groups.get(&(task.to_string(), algorithm.to_string())) {
+            Some(found) => found.clone(),
+            None => Err(format!("no {algorithm} runs on this task")),
+        }
+    }
+}
+
+impl CellSource for OursSide<'_> {
+    fn value(&self, cell: &CellRef) -> std::result::Result<CellValue, String> {
+        let (gr, _) = self.group(&cell.task, &cell.algorithm)?;
+        let m = gr
+            .metric(&cell.metric)
+            .ok_or_else(|| "not a metric of our report".to_string())?;
+        let Some(mean) = m.mean else {
+            return Err(m.note.clone().unwrap_or_else(|| "missing".into()));
+        };
+        let factor = match dimension_of(&cell.metric) {
+            None => 1.0,
+            Some(dim) => match (
+                unit_scale(&m.unit),
+                unit_scale(report_unit(dim, &cell.metric)),
+            ) {
+                (Some((a, fa)), Some((b, fb))) if a == b => fa / fb,
+                _ => return Err(format!("our unit `{}` is not convertible", m.unit)),
+            },
+        };
+        Ok(CellValue {
+            mean: mean * factor,
+            std: m.std.map(|s| s * factor),
+        })
+    }
+
+    fn unit(&self, cell: &CellRef) -> String {
+        finding_unit(&cell.metric)
+    }
+}
+
+/// Checks every finding of `tables` on the report's runs (and on the paper's own figures).
+pub fn check_findings(
+    report: &Report,
+    groups: &[Group],
+    tables: &PaperTables,
+) -> Vec<FindingCheck> {
+    let ours = OursSide::new(report, groups, tables);
+    let paper = PaperSide(tables);
+    tables
+        .findings
+        .iter()
+        .map(|f| {
+            let on_paper = f.evaluate(&paper);
+            let on_ours = f.evaluate(&ours);
+            let mut notes: Vec<String> = f.note.iter().cloned().collect();
+            if !on_ours.missing.is_empty() {
+                notes.push(format!(
+                    "missing in our runs: {}",
+                    on_ours.missing.join("; ")
+                ));
+            }
+            if on_paper.holds != Some(true) {
+                notes.push(format!(
+                    "the definition does not hold on the paper's own figures{}",
+                    if on_paper.missing.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({})", on_paper.missing.join("; "))
+                    }
+                ));
+            }
+            FindingCheck {
+                id: f.id.clone(),
+                claim: f.claim.clone(),
+                paper: on_paper.text,
+                ours: on_ours.text,
+                holds: on_ours.holds,
+                note: (!notes.is_empty()).then(|| notes.join("; ")),
+                paper_holds: on_paper.holds,
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -581,6 +917,8 @@ mod tests {
             measured_unit: None,
             source: Some("Table 1, row 'x'".into()),
             note: Some("n".into()),
+            paper_metric: None,
+            phase: None,
         }
     }
 

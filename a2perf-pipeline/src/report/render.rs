@@ -3,7 +3,7 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
-use super::paper::{PaperCell, PaperComparison, RATIO_METRICS};
+use super::paper::{FindingCheck, PaperCell, PaperComparison, RATIO_METRICS, Verdict};
 use super::{Category, Group, GroupReport, MetricValue, Report, TableSettings};
 
 /// The original's number format: two decimals, or scientific notation below 0.01.
@@ -82,9 +82,116 @@ fn paper_cell(c: Option<&PaperCell>, latex: bool) -> String {
                 s.push_str(pm);
                 s.push_str(&format_value(sd));
             }
-            if latex { format!("${s}$") } else { s }
+            if latex {
+                s = format!("${s}$");
+            }
+            if let Some(v) = c.and_then(verdict_text) {
+                let _ = write!(s, " ({v})");
+            }
+            s
         }
     }
+}
+
+/// `beats`, `within`, or `trails by GAP`: where our mean stands against the paper's.
+///
+/// ```
+/// use a2perf_pipeline::report::paper::{PaperCell, Verdict};
+/// use a2perf_pipeline::report::render::verdict_text;
+/// let (verdict, gap) = Verdict::judge(0.25, 1.0, Some(0.5));
+/// let cell = PaperCell {
+///     key: "returns".into(), mean: Some(1.0), std: Some(0.5), unit: "100 eps.".into(),
+///     published: None, conversion: None, ratio: None, source: None, note: None,
+///     verdict: Some(verdict), gap, paper_metric: None, phase: None,
+/// };
+/// assert_eq!(verdict_text(&cell).as_deref(), Some("trails by 0.75"));
+/// ```
+pub fn verdict_text(c: &PaperCell) -> Option<String> {
+    c.verdict.map(|v| match (v, c.gap) {
+        (Verdict::Trails, Some(gap)) => format!("trails by {}", format_value(gap)),
+        _ => v.as_str().to_string(),
+    })
+}
+
+/// `holds`, `does not hold` or `not checked`.
+fn holds_text(h: Option<bool>) -> &'static str {
+    match h {
+        Some(true) => "holds",
+        Some(false) => "does not hold",
+        None => "not checked",
+    }
+}
+
+/// The findings section of `report.md`.
+fn findings_md(s: &mut String, findings: &[FindingCheck]) {
+    let esc = |t: &str| t.replace('|', "\\|");
+    let _ = writeln!(s, "## The paper's findings\n");
+    let _ = writeln!(
+        s,
+        "Each claim of the paper's evaluation, checked on these runs with the same definition \
+         as on the paper's figures (in `tables.json`).\n"
+    );
+    let _ = writeln!(
+        s,
+        "| Id | Claim | Paper | Ours | On our runs |\n|---|---|---|---|---|"
+    );
+    for f in findings {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | **{}** |",
+            esc(&f.id),
+            esc(&f.claim),
+            esc(&f.paper),
+            esc(&f.ours),
+            holds_text(f.holds)
+        );
+    }
+    let notes: Vec<String> = findings
+        .iter()
+        .filter_map(|f| f.note.as_ref().map(|n| format!("- {}: {n}", f.id)))
+        .collect();
+    let _ = writeln!(s);
+    if !notes.is_empty() {
+        let _ = writeln!(
+            s,
+            "<details><summary>Notes</summary>\n\n{}\n\n</details>\n",
+            notes.join("\n")
+        );
+    }
+}
+
+/// Text for LaTeX: escaped, with the symbols of the findings' numbers in math mode.
+fn tex_text(t: &str) -> String {
+    tex_escape(t)
+        .replace('±', "$\\pm$")
+        .replace('≤', "$\\le$")
+        .replace('≥', "$\\ge$")
+        .replace('×', "$\\times$")
+        .replace('≈', "$\\approx$")
+        .replace('—', "--")
+}
+
+/// The findings as a LaTeX table.
+fn findings_latex(s: &mut String, findings: &[FindingCheck]) {
+    let _ = writeln!(
+        s,
+        "\\begin{{table}}[t]\n\\centering\n\\small\n\\begin{{tabular}}{{lp{{5cm}}p{{3.5cm}}p{{3.5cm}}l}}\n\\toprule\nId & Claim & Paper & Ours & On our runs \\\\\n\\midrule"
+    );
+    for f in findings {
+        let _ = writeln!(
+            s,
+            "{} & {} & {} & {} & {} \\\\",
+            tex_text(&f.id),
+            tex_text(&f.claim),
+            tex_text(&f.paper),
+            tex_text(&f.ours),
+            holds_text(f.holds)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\\bottomrule\n\\end{{tabular}}\n\\caption{{The paper's findings, checked on these runs.}}\n\\label{{tab:paper-findings}}\n\\end{{table}}\n"
+    );
 }
 
 /// One line naming a profile and every switch it gives the task's environment.
@@ -327,6 +434,9 @@ pub fn markdown(report: &Report) -> String {
             );
         }
     }
+    if !report.findings.is_empty() {
+        findings_md(&mut s, &report.findings);
+    }
     if !report.iqm.is_empty() {
         let _ = writeln!(s, "## Interquartile mean of returns (95% bootstrap CI)\n");
         let _ = writeln!(
@@ -549,6 +659,9 @@ pub fn latex(report: &Report) -> String {
             super::super::plan::path_safe(task)
         );
     }
+    if !report.findings.is_empty() {
+        findings_latex(&mut s, &report.findings);
+    }
     s
 }
 
@@ -556,7 +669,7 @@ pub fn latex(report: &Report) -> String {
 /// `paper_comparison.csv`.
 pub fn paper_csv(report: &Report) -> String {
     let mut s = String::from(
-        "task,paper_task,algorithm,metric,unit,ours_mean,paper_mean,paper_std,ratio_ours_over_paper,published,conversion,source,note\n",
+        "task,paper_task,algorithm,metric,unit,ours_mean,paper_mean,paper_std,ratio_ours_over_paper,verdict,gap,published,conversion,source,note\n",
     );
     for p in &report.paper {
         for col in &p.columns {
@@ -568,7 +681,7 @@ pub fn paper_csv(report: &Report) -> String {
                 let mean = ours.and_then(|g| g.metric(&c.key)).and_then(|m| m.mean);
                 let _ = writeln!(
                     s,
-                    "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                     csv_field(&p.task),
                     csv_field(&p.paper_task),
                     csv_field(&col.algorithm),
@@ -578,6 +691,8 @@ pub fn paper_csv(report: &Report) -> String {
                     opt(c.mean),
                     opt(c.std),
                     opt(c.ratio),
+                    c.verdict.map(Verdict::as_str).unwrap_or_default(),
+                    opt(c.gap),
                     csv_field(c.published.as_deref().unwrap_or("")),
                     csv_field(c.conversion.as_deref().unwrap_or("")),
                     csv_field(c.source.as_deref().unwrap_or("")),
