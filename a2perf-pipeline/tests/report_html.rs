@@ -313,3 +313,50 @@ fn names_and_notes_from_results_are_text_not_markup() {
         "markdown escaping"
     );
 }
+
+#[test]
+fn committed_report_directories_render_without_their_runs() {
+    let results = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results");
+    let mut rendered = 0;
+    for entry in std::fs::read_dir(&results).unwrap() {
+        let dir = entry.unwrap().path();
+        if !dir.join("report.json").is_file() || !dir.join("curves.csv").is_file() {
+            continue;
+        }
+        let page = html::page_from_report_dir(&dir).unwrap();
+        let json: Json =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap())
+                .unwrap();
+        check_numbers(&page, &json);
+        // Curves drawn from curves.csv; no run links without run directories.
+        assert!(page.contains("<g class=\"series\""), "{}", dir.display());
+        assert!(page.contains("(not included)"));
+        rendered += 1;
+    }
+    assert!(
+        rendered > 0,
+        "no report directories in {}",
+        results.display()
+    );
+
+    let tmp = tempfile::tempdir().unwrap();
+    let some = std::fs::read_dir(&results)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|d| d.join("report.json").is_file())
+        .unwrap();
+    std::fs::copy(some.join("report.json"), tmp.path().join("report.json")).unwrap();
+    std::fs::write(
+        tmp.path().join("curves.csv"),
+        "run,step,value\nnobody/x/seed0,1,2\n",
+    )
+    .unwrap();
+    let err = html::page_from_report_dir(tmp.path())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("curves.csv")
+            && err.contains("line 2: run `nobody/x/seed0` is not in report.json"),
+        "{err}"
+    );
+}
