@@ -107,8 +107,10 @@ pub fn json_for_script<T: Serialize>(value: &T) -> String {
 /// A path for an `href`: each component percent-encoded (all but letters, digits, `-`, `_`,
 /// `.`, `~`), joined by `/`.
 fn href(path: &Path) -> String {
+    use std::path::Component;
     let parts: Vec<String> = path
         .components()
+        .filter(|c| matches!(c, Component::Normal(_) | Component::ParentDir))
         .map(|c| {
             let s = c.as_os_str().to_string_lossy();
             let mut out = String::new();
@@ -224,7 +226,9 @@ fn csv_fields(line: &str) -> Vec<String> {
         match (c, quoted) {
             ('"', true) if chars.peek() == Some(&'"') => {
                 chars.next();
-                fields.last_mut().map(|f| f.push('"'));
+                if let Some(f) = fields.last_mut() {
+                    f.push('"');
+                }
             }
             ('"', _) => quoted = !quoted,
             (',', false) => fields.push(String::new()),
@@ -707,7 +711,7 @@ fn task_section(s: &mut String, report: &Report, runs: &[RunView], ti: usize, ta
     }
     s.push_str("</tr></thead>\n<tbody>\n");
     let mut last: Option<Category> = None;
-    for (mi, m) in first.metrics.iter().enumerate() {
+    for m in &first.metrics {
         let arrow = if m.higher_is_better { "↑" } else { "↓" };
         let cat = if last == Some(m.category) {
             String::new()
@@ -751,7 +755,6 @@ fn task_section(s: &mut String, report: &Report, runs: &[RunView], ti: usize, ta
             }
         }
         s.push_str("</tr>\n");
-        let _ = mi;
     }
     s.push_str("</tbody>\n</table></div>\n");
     if paper.is_some() {
@@ -998,7 +1001,6 @@ fn curves(s: &mut String, runs: &[RunView], groups: &[&GroupReport], ti: usize) 
 /// Dash patterns, one per series, so that curves differ without colour.
 const DASHES: [&str; 4] = ["none", "6 3", "2 3", "8 3 2 3"];
 
-#[allow(clippy::type_complexity)]
 fn axes(
     s: &mut String,
     (l, t, pw, ph): (f64, f64, f64, f64),
