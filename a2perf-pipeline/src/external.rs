@@ -51,7 +51,7 @@ use a2perf_core::{
     write_atomic, write_json_atomic,
 };
 
-use super::plan::{ExperimentPlan, RunJob, from_experiment, path_safe};
+use super::plan::{ExperimentPlan, RunJob, check_dir_name, from_experiment, path_safe};
 use super::train::{
     MeterFactory, MeteredPhase, Phase, PlannedRun, SegmentOutcome, Start, TrainSegment,
     TrainSegments, prepare, wipe, write_curve, write_run_files, write_train_system,
@@ -180,13 +180,7 @@ pub fn external_plan(registry: &Registry, spec: &ExternalRunSpec) -> Result<Expe
         )));
     }
     let experiment = spec.experiment.clone().unwrap_or_else(|| path_safe(name));
-    if experiment.is_empty() || path_safe(&experiment) != experiment || experiment.starts_with('.')
-    {
-        return Err(PipelineError::Invalid(format!(
-            "experiment `{experiment}`: use letters, digits, `-`, `_` and `.` only (it names a \
-             directory), not starting with `.`"
-        )));
-    }
+    check_dir_name("experiment", &experiment)?;
     let invalid = |e: config::ConfigError| PipelineError::Invalid(e.to_string());
     let mut exp = match &spec.config {
         Some(path) => a2perf_core::Experiment::load(path, &spec.set, registry).map_err(invalid)?,

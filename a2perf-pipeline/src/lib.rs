@@ -85,8 +85,8 @@ pub use infer::{InferOptions, InferenceResults, infer_run, infer_run_with};
 pub use plan::{
     AlgorithmSpec, ExperimentPlan, GeneralizationSettings, GeneralizationSuite, GeneralizationTask,
     InferenceSettings, LoadedPlans, MetricSettings, ObservationSource, ProfileRecord,
-    ProfileSwitch, RunJob, Shard, Suite, SuiteSource, TaskSpec, from_experiment, grid, load_plans,
-    parse_seeds,
+    ProfileSwitch, RunJob, Shard, Suite, SuiteSource, TaskSpec, check_dir_name, from_experiment,
+    grid, load_plans, parse_seeds,
 };
 pub use run::{RunEvent, RunOptions, expand_runs, run_experiments};
 pub use sysinfo::SystemInfo;

@@ -305,6 +305,8 @@ pub fn from_experiment(
 ) -> Result<ExperimentPlan> {
     use a2perf_core::config::ObservationSource as Source;
     let invalid = |e: a2perf_core::ConfigError| PipelineError::Invalid(e.to_string());
+    // The name becomes `output.dir/<name>`: refused here, before anything is written.
+    check_dir_name("experiment", &exp.name)?;
     let env = exp.require_env().map_err(invalid)?;
     let algo = exp.require_algorithm().map_err(invalid)?;
     let defaults = registry.env_params(&env.id, &BTreeMap::new())?;
@@ -444,6 +446,28 @@ pub fn generalization_suite(
         })
         .collect();
     Ok(Some(GeneralizationSuite { source, tasks }))
+}
+
+/// Checks a name that becomes a directory (an experiment, a suite): letters, digits, `-`, `_`
+/// and `.` only, not starting with `.`, so that it can neither leave the output directory
+/// (`../x`, `a/b`) nor hide in it. `what` names the kind of name in the error.
+///
+/// ```
+/// use a2perf_pipeline::check_dir_name;
+/// assert!(check_dir_name("experiment", "web_ppo-2.1").is_ok());
+/// let err = check_dir_name("experiment", "../escaped").unwrap_err().to_string();
+/// assert!(err.contains("experiment `../escaped`: use letters, digits"), "{err}");
+/// assert!(check_dir_name("suite", ".hidden").is_err());
+/// assert!(check_dir_name("suite", "").is_err());
+/// ```
+pub fn check_dir_name(what: &str, name: &str) -> Result<()> {
+    if name.is_empty() || path_safe(name) != name || name.starts_with('.') {
+        return Err(PipelineError::Invalid(format!(
+            "{what} `{name}`: use letters, digits, `-`, `_` and `.` only (it names a \
+             directory), not starting with `.`"
+        )));
+    }
+    Ok(())
 }
 
 /// `s` with characters that are awkward in paths replaced by `_`.
@@ -787,6 +811,10 @@ pub fn load_plans(
                         e.code
                     ))
                 })?;
+            if !suite.name.is_empty() {
+                check_dir_name("suite", &suite.name)
+                    .map_err(|e| PipelineError::Invalid(format!("{}: {e}", path.display())))?;
+            }
             let base = path.parent().unwrap_or(std::path::Path::new("."));
             let overrides_of = |entry: &SuiteEntry| {
                 let mut overrides = suite.set.clone();

@@ -941,6 +941,39 @@ impl ChromiumBackend {
             .unwrap_or(Json::Null))
     }
 
+    /// Navigates to `url` (any page, e.g. a `file://` report) and waits until its document has
+    /// loaded (`document.readyState` is `complete`). The next [`load`](Self::load) starts from
+    /// a fresh page shell.
+    pub fn navigate(&mut self, url: &str) -> Result<(), WebError> {
+        self.window = None;
+        self.since_navigation = RELOAD_EVERY;
+        let path = format!("/session/{}/url", self.session);
+        self.call("POST", &path, &json!({ "url": url }).to_string())?;
+        let probe = "return document.readyState === 'complete' && location.href === new URL(arguments[0]).href;";
+        let args = Json::Array(vec![Json::String(url.into())]).to_string();
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            match self.execute(probe, &args) {
+                Ok(Json::Bool(true)) => return Ok(()),
+                Ok(_) | Err(WebError::Browser(_)) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                Ok(_) => return Err(died(format!("{url} did not load within 30 s"))),
+                Err(e) => return Err(e),
+            }
+        }
+    }
+
+    /// A PNG of the browser's viewport as it is now.
+    pub fn screenshot_png(&mut self) -> Result<Vec<u8>, WebError> {
+        let path = format!("/session/{}/screenshot", self.session);
+        let v = self.call("GET", &path, "")?;
+        let text = v
+            .as_str()
+            .ok_or_else(|| WebError::Browser(format!("screenshot: not a string: {v:.100}")))?;
+        decode_base64(text).ok_or_else(|| WebError::Browser("screenshot: bad base64".into()))
+    }
+
     /// Runs `script` with JSON `args` in the page (one round trip) and returns its result.
     pub fn execute(&mut self, script: &str, args: &str) -> Result<Json, WebError> {
         let path = format!("/session/{}/execute/sync", self.session);
@@ -1122,6 +1155,33 @@ impl Drop for ChromiumBackend {
     }
 }
 
+/// Standard base64 (padding optional, no line breaks), as WebDriver sends screenshots.
+fn decode_base64(text: &str) -> Option<Vec<u8>> {
+    let digit = |c: u8| -> Option<u32> {
+        Some(match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' => 62,
+            b'/' => 63,
+            _ => return None,
+        } as u32)
+    };
+    let bytes = text.trim_end_matches('=').as_bytes();
+    let mut out = Vec::with_capacity(bytes.len() * 3 / 4);
+    for chunk in bytes.chunks(4) {
+        if chunk.len() == 1 {
+            return None;
+        }
+        let mut acc = 0u32;
+        for (i, &c) in chunk.iter().enumerate() {
+            acc |= digit(c)? << (18 - 6 * i);
+        }
+        out.extend_from_slice(&acc.to_be_bytes()[1..chunk.len()]);
+    }
+    Some(out)
+}
+
 /// Reads the page script's state object into `state`, checking it against the model.
 fn ingest(v: &Json, site: &mut Website, state: &mut DomState) -> Result<(), WebError> {
     let bad = |what: &str| WebError::Browser(format!("malformed page state: {what}"));
@@ -1207,4 +1267,19 @@ fn ingest(v: &Json, site: &mut Website, state: &mut DomState) -> Result<(), WebE
         _ => Event::None,
     };
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::decode_base64;
+
+    #[test]
+    fn base64_decodes_with_and_without_padding() {
+        assert_eq!(decode_base64("aGVsbG8=").as_deref(), Some(&b"hello"[..]));
+        assert_eq!(decode_base64("aGVsbG8").as_deref(), Some(&b"hello"[..]));
+        assert_eq!(decode_base64("aGk+Pz8/").as_deref(), Some(&b"hi>???"[..]));
+        assert_eq!(decode_base64("").as_deref(), Some(&b""[..]));
+        assert_eq!(decode_base64("a$=="), None);
+        assert_eq!(decode_base64("aGVsb"), None);
+    }
 }

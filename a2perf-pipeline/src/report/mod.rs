@@ -20,6 +20,7 @@ use super::{
     SYSTEM_INFO_FILE, SystemInfo, TRAIN_SYSTEM_FILE, find_runs, io_err,
 };
 
+pub mod html;
 pub mod leaderboard;
 pub mod paper;
 pub mod render;
@@ -1221,7 +1222,7 @@ pub fn build_report_with_paper(
     Ok((report, groups))
 }
 
-/// Builds the report and writes every output into `out`: `report.md`, `report.tex`,
+/// Builds the report and writes every output into `out`: `report.md`, `index.html`, `report.tex`,
 /// `metrics.csv`, `report.json`, `leaderboard.json`, `curves.csv` and `scores.csv` (the inputs
 /// of `a2perf metrics reliability` and `a2perf metrics iqm`) and
 /// `plots/{radar,curves}_<task>.svg`.
@@ -1246,6 +1247,10 @@ pub fn write_report_with_paper(
         a2perf_core::write_atomic(&p, text.as_bytes()).map_err(io_err(&p))
     };
     write("report.md", &render::markdown(&report))?;
+    write(
+        "index.html",
+        &html::page(&report, &html::RunView::of_groups(&groups, out)),
+    )?;
     write("report.tex", &render::latex(&report))?;
     write("metrics.csv", &render::csv(&report))?;
     write("curves.csv", &render::curves_csv(&groups))?;

@@ -43,6 +43,38 @@ pub fn format_ratio(r: f64) -> String {
     }
 }
 
+/// Text from the results (names, notes, reasons) made inert in Markdown: HTML's `&`, `<` and
+/// `>` become entities, so a name holding markup is shown, never run, and `|` is escaped so that
+/// it cannot split a table cell.
+///
+/// ```
+/// use a2perf_pipeline::report::render::md_text;
+/// assert_eq!(md_text("<img src=x>|a&b"), "&lt;img src=x&gt;\\|a&amp;b");
+/// ```
+pub fn md_text(t: &str) -> String {
+    let mut out = String::with_capacity(t.len());
+    for c in t.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '|' => out.push_str("\\|"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// A code span of `t` outside tables; inside one nothing is markup, so only a backtick (which
+/// would end the span early) makes it fall back to [`md_text`].
+fn md_code(t: &str) -> String {
+    if t.contains('`') || t.contains('\n') {
+        md_text(t)
+    } else {
+        format!("`{t}`")
+    }
+}
+
 fn cell(m: &MetricValue, latex: bool) -> String {
     match m.mean {
         None => {
@@ -230,7 +262,7 @@ fn upper(algos: &[String]) -> String {
 }
 
 /// The profile and generalization-suite lines printed under a table's heading.
-fn settings_lines(t: &TableSettings) -> Vec<String> {
+pub(super) fn settings_lines(t: &TableSettings) -> Vec<String> {
     let mut out = Vec::new();
     if t.mixed_profiles() {
         let parts: Vec<String> = t
@@ -270,7 +302,7 @@ fn settings_lines(t: &TableSettings) -> Vec<String> {
 }
 
 /// Where the paper's column of a table comes from.
-fn paper_heading(p: &PaperComparison) -> String {
+pub(super) fn paper_heading(p: &PaperComparison) -> String {
     format!(
         "{}{} ({}; paper task `{}`)",
         p.paper_title,
@@ -366,29 +398,31 @@ pub fn markdown(report: &Report) -> String {
         let groups: Vec<&GroupReport> = report.groups.iter().filter(|g| g.task == task).collect();
         let first = groups[0];
         let paper = report.paper_of(task);
-        let _ = writeln!(s, "## {task} (`{}`, {})\n", first.env_id, first.domain);
+        let _ = writeln!(
+            s,
+            "## {} ({}, {})\n",
+            md_text(task),
+            md_code(&first.env_id),
+            md_text(&first.domain)
+        );
         if let Some(t) = report.settings_of(task) {
             for line in settings_lines(t) {
-                let _ = writeln!(s, "{line}\n");
+                let _ = writeln!(s, "{}\n", md_text(&line));
             }
         }
         if let Some(p) = paper {
             let _ = writeln!(
                 s,
                 "Paper columns: {}, in our units (conversions in the notes).\n",
-                paper_heading(p)
+                md_text(&paper_heading(p))
             );
         }
         let _ = write!(s, "| Category | Metric | ");
         for g in &groups {
-            let _ = write!(
-                s,
-                "{} (seeds {}) | ",
-                g.algorithm.to_uppercase(),
-                g.seeds.len()
-            );
+            let algorithm = md_text(&g.algorithm.to_uppercase());
+            let _ = write!(s, "{algorithm} (seeds {}) | ", g.seeds.len());
             if paper.is_some() {
-                let _ = write!(s, "{} (paper) | ", g.algorithm.to_uppercase());
+                let _ = write!(s, "{algorithm} (paper) | ");
             }
         }
         let _ = writeln!(s);
@@ -396,7 +430,13 @@ pub fn markdown(report: &Report) -> String {
         let _ = writeln!(s, "|---|---|{}", "---|".repeat(columns));
         for (cat, key, label, unit, higher) in rows(&groups) {
             let arrow = if higher { "↑" } else { "↓" };
-            let _ = write!(s, "| {} | {label} ({unit}) {arrow} | ", cat.label());
+            let _ = write!(
+                s,
+                "| {} | {} ({}) {arrow} | ",
+                cat.label(),
+                md_text(label),
+                md_text(unit)
+            );
             for g in &groups {
                 let c = g.metric(key).map_or_else(|| "—".into(), |m| cell(m, false));
                 let _ = write!(s, "{c} | ");
@@ -419,12 +459,21 @@ pub fn markdown(report: &Report) -> String {
         for g in &groups {
             for m in &g.metrics {
                 if let Some(n) = &m.note {
-                    notes.push(format!("- {} / {}: {}", g.algorithm, m.key, n));
+                    notes.push(format!(
+                        "- {} / {}: {}",
+                        md_text(&g.algorithm),
+                        m.key,
+                        md_text(n)
+                    ));
                 }
             }
         }
         if let Some(p) = paper {
-            notes.extend(paper_notes(p).into_iter().map(|n| format!("- {n}")));
+            notes.extend(
+                paper_notes(p)
+                    .into_iter()
+                    .map(|n| format!("- {}", md_text(&n))),
+            );
         }
         if !notes.is_empty() {
             let _ = writeln!(
@@ -447,8 +496,8 @@ pub fn markdown(report: &Report) -> String {
             let _ = writeln!(
                 s,
                 "| {} | {} | {} | {} | [{}, {}] |",
-                e.task,
-                e.algorithm,
+                md_text(&e.task),
+                md_text(&e.algorithm),
                 e.runs,
                 format_value(e.iqm),
                 format_value(e.ci95[0]),
@@ -467,8 +516,8 @@ pub fn markdown(report: &Report) -> String {
             let _ = writeln!(
                 s,
                 "| {} | {} | {} | {:.3} | [{:.3}, {:.3}] |",
-                e.x,
-                e.y,
+                md_text(&e.x),
+                md_text(&e.y),
                 e.tasks.len(),
                 e.probability,
                 e.ci95[0],
@@ -480,7 +529,7 @@ pub fn markdown(report: &Report) -> String {
     if !report.skipped_runs.is_empty() {
         let _ = writeln!(s, "## Runs left out\n");
         for (dir, why) in &report.skipped_runs {
-            let _ = writeln!(s, "- `{dir}`: {why}");
+            let _ = writeln!(s, "- {}: {}", md_code(dir), md_text(why));
         }
     }
     s
@@ -521,12 +570,18 @@ fn ratio_table_md(s: &mut String, groups: &[&GroupReport], p: &PaperComparison) 
     );
     let _ = write!(s, "| Category | Metric | ");
     for g in groups {
-        let _ = write!(s, "{} | ", g.algorithm.to_uppercase());
+        let _ = write!(s, "{} | ", md_text(&g.algorithm.to_uppercase()));
     }
     let _ = writeln!(s);
     let _ = writeln!(s, "|---|---|{}", "---|".repeat(groups.len()));
     for (m, ratios) in ratio_rows(groups, p) {
-        let _ = write!(s, "| {} | {} ({}) | ", m.category.label(), m.label, m.unit);
+        let _ = write!(
+            s,
+            "| {} | {} ({}) | ",
+            m.category.label(),
+            md_text(&m.label),
+            md_text(&m.unit)
+        );
         for r in ratios {
             let _ = write!(s, "{} | ", r.map_or_else(|| "—".into(), format_ratio));
         }

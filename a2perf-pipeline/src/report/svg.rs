@@ -7,7 +7,7 @@ use std::fmt::Write;
 use super::{Group, GroupReport};
 use crate::stats::percentile_sorted;
 
-const PALETTE: [&str; 8] = [
+pub(super) const PALETTE: [&str; 8] = [
     "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
 ];
 
@@ -170,7 +170,7 @@ pub fn radar(task: &str, groups: &[&GroupReport]) -> String {
 /// (step, q25, median, q75).
 type QuartilePoint = (f64, f64, f64, f64);
 
-fn nice_ticks(lo: f64, hi: f64) -> Vec<f64> {
+pub(super) fn nice_ticks(lo: f64, hi: f64) -> Vec<f64> {
     let span = (hi - lo).max(1e-12);
     let raw = span / 5.0;
     let mag = 10f64.powf(raw.log10().floor());
@@ -188,7 +188,7 @@ fn nice_ticks(lo: f64, hi: f64) -> Vec<f64> {
     out
 }
 
-fn tick_label(v: f64) -> String {
+pub(super) fn tick_label(v: f64) -> String {
     let v = if v.abs() < 1e-12 { 0.0 } else { v };
     if v != 0.0 && (v.abs() >= 1e5 || v.abs() < 1e-2) {
         format!("{v:.1e}")
