@@ -52,6 +52,7 @@ use a2perf_core::{
 };
 
 use super::plan::{ExperimentPlan, RunJob, from_experiment, path_safe};
+use super::run_lock::TrainingLock;
 use super::train::{
     MeterFactory, MeteredPhase, Phase, PlannedRun, SegmentOutcome, Start, TrainSegment,
     TrainSegments, prepare, wipe, write_curve, write_run_files, write_train_system,
@@ -285,6 +286,8 @@ pub struct ExternalRun {
     curve: LearningCurve,
     checkpoints: BTreeMap<u64, PathBuf>,
     warnings: Vec<String>,
+    /// Held from `begin` to `finish` (or drop): no other trainer takes the directory meanwhile.
+    lock: TrainingLock,
 }
 
 impl std::fmt::Debug for ExternalRun {
@@ -300,6 +303,9 @@ impl ExternalRun {
     /// Creates the run directory of `plan` and `seed` exactly as [`train`](crate::train())
     /// would (an unfinished run of the same or another configuration is started again, with a
     /// warning in the second case; a complete one is refused), and starts the training meters.
+    /// The run holds the directory's training lock until it finishes or is dropped; a
+    /// directory another trainer holds is refused with [`PipelineError::Locked`] (see
+    /// [`run_lock`](crate::run_lock)).
     pub fn begin(
         registry: &Registry,
         plan: ExperimentPlan,
@@ -322,6 +328,7 @@ impl ExternalRun {
             ))
         };
         let planned = PlannedRun::new(registry, &job, job.plan.algorithm.clone(), Some(agent))?;
+        let lock = TrainingLock::acquire(&dir)?;
         let mut warnings = Vec::new();
         match prepare(&run, &planned.record_json, &mut warnings)? {
             Start::Skip => return Err(complete()),
@@ -358,6 +365,7 @@ impl ExternalRun {
             curve: LearningCurve::default(),
             checkpoints: BTreeMap::new(),
             warnings,
+            lock,
         })
     }
 
@@ -488,6 +496,7 @@ impl ExternalRun {
             phase,
             mut segments,
             curve,
+            lock,
             ..
         } = self;
         let system = phase.finish();
@@ -525,6 +534,7 @@ impl ExternalRun {
             write_train_system(&run, &segments)?;
         }
         run.set_status(state, &note)?;
+        drop(lock);
         if no_curve {
             return Err(PipelineError::Invalid(format!(
                 "{}: marked failed: the agent logged no evaluation (call run.log_evaluation or \
