@@ -66,8 +66,10 @@ def test_training_run_writes_what_a2perf_train_writes(tmp_path: Path) -> None:
     assert names == sorted([
         "checkpoints", "curve.csv", "curve.json", "operative_config.ron", "run.json",
         "status.json", "system_info.json", "train_emissions.csv", "train_segments.json",
-        "train_system.json",
+        "train_system.json", "train.lock",
     ])
+    # The training lock was released and its record emptied when the block was left.
+    assert (run.run_dir / "train.lock").read_text() == ""
     record = read(run.run_dir / "run.json")
     assert record["algorithm"] == {"name": "py-agent",
                                    "params": {"hidden": [8, 8], "lr": 0.1, "tag": "x"}}

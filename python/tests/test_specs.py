@@ -102,11 +102,13 @@ def test_typed_kwargs_survive_json_and_pickle(tmp_path: Path) -> None:
     env = gym.make(
         TOY,
         netlist_file=Path(kwargs["netlist_file"]),
-        seed=np.int64(7),
+        density_weight=np.float32(0.5),
         illegal_action="raise",
     )
     assert env.spec.kwargs["netlist_file"] == kwargs["netlist_file"]
-    assert type(env.spec.kwargs["seed"]) is int and env.spec.kwargs["seed"] == 7
+    weight = env.spec.kwargs["density_weight"]
+    assert type(weight) is float and weight == 0.5
+    assert env.unwrapped.params["density_weight"] == 0.5
     decoded = json.loads(env.spec.to_json())
     assert decoded["kwargs"]["illegal_action"] == "raise"
     for restored in (EnvSpec.from_json(env.spec.to_json()), pickle.loads(pickle.dumps(env.spec))):
