@@ -39,7 +39,9 @@ enum Command {
     /// Score your own logs: reliability metrics and IQM confidence intervals.
     Metrics(metrics_cmd::MetricsArgs),
     /// Train one run per (task, algorithm, seed); resumable (SIGTERM/Ctrl-C write a resume point,
-    /// exit code 75; rerun to continue), shardable (`--shard i/N`).
+    /// exit code 75; rerun to continue), shardable (`--shard i/N`), one trainer per run (a run
+    /// another process is training is left to it: exit code 73).
+    #[command(after_help = EXIT_CODES)]
     Train(pipeline_cmd::TrainArgs),
     /// Roll out trained policies and time their inference (RAM, power, energy too).
     Infer(pipeline_cmd::InferArgs),
@@ -48,14 +50,29 @@ enum Command {
     /// The paper's tables, radar plots, curves and a leaderboard entry from result directories.
     Report(pipeline_cmd::ReportArgs),
     /// Train, infer, generalize and report in one go (e.g. `a2perf run configs/quickstart.ron`).
+    #[command(after_help = EXIT_CODES)]
     Run(pipeline_cmd::RunArgs),
     /// Evaluate checkpoints, assign expertise levels and collect offline datasets.
     Collect(pipeline_cmd::CollectArgs),
 }
 
+/// The exit codes of `train` and `run`, shown by their `--help`.
+const EXIT_CODES: &str = "\
+Exit codes:
+  0   every run is complete
+  1   an error (a run failed, a bad config, an unwritable output)
+  73  runs left alone because another trainer holds them (each run directory holds an exclusive
+      lock while it is trained; the message names the holder's pid and host): rerun once it
+      has stopped
+  75  interrupted by SIGTERM or Ctrl-C: rerun the same command to continue";
+
 fn main() {
     let cli = Cli::parse();
     if let Err(err) = run(cli) {
+        if locked(&err) {
+            eprintln!("error: {}", error_chain(&err));
+            std::process::exit(pipeline_cmd::EXIT_LOCKED);
+        }
         if interrupted(&err) {
             eprintln!(
                 "interrupted: rerun the same command to continue (exit code {})",
@@ -66,6 +83,16 @@ fn main() {
         eprintln!("error: {}", error_chain(&err));
         std::process::exit(1);
     }
+}
+
+/// Whether the pipelines left runs alone because other trainers hold them.
+fn locked(err: &anyhow::Error) -> bool {
+    err.chain().any(|c| {
+        matches!(
+            c.downcast_ref::<a2perf_pipeline::PipelineError>(),
+            Some(a2perf_pipeline::PipelineError::Locked(_))
+        )
+    })
 }
 
 /// Whether the pipelines stopped because SIGTERM or Ctrl-C asked them to.

@@ -174,6 +174,12 @@ pub enum CostArg {
 /// the same command again.
 pub const EXIT_INTERRUPTED: i32 = 75;
 
+/// Exit code of `train` and `run` when they left runs alone because another trainer holds them
+/// (`EX_CANTCREAT`, "cannot create an output file": the run directory is being written by that
+/// process). Distinct from [`EXIT_INTERRUPTED`] because rerunning at once would only meet the
+/// same lock: wait for the holder (its pid and host are printed), then rerun.
+pub const EXIT_LOCKED: i32 = 73;
+
 /// A cancel token set by the first SIGTERM or SIGINT: runs then write a resume point at their
 /// next safe point and stop, and the process exits with [`EXIT_INTERRUPTED`] — at the latest
 /// `grace` after the signal. A second SIGINT exits at once with 130, a second SIGTERM with 143.
@@ -273,9 +279,17 @@ fn print_train_summary(summary: &pipeline::TrainSummary) {
     let skipped = summary.with(&pipeline::RunOutcome::Skipped).len();
     let cancelled = summary.with(&pipeline::RunOutcome::Cancelled).len();
     let failed = summary.failures().len();
+    let locked = summary.locked();
+    for run in &locked {
+        eprintln!("{run}");
+    }
+    let locked_note = match locked.len() {
+        0 => String::new(),
+        n => format!(", {n} left to the other trainer that holds them"),
+    };
     eprintln!(
         "train: {done} trained, {skipped} already complete, {cancelled} interrupted (rerun to \
-         continue), {failed} failed"
+         continue), {failed} failed{locked_note}"
     );
 }
 

@@ -52,6 +52,7 @@ use a2perf_core::{
 };
 
 use super::plan::{ExperimentPlan, RunJob, check_dir_name, from_experiment, path_safe};
+use super::run_lock::TrainingLock;
 use super::train::{
     MeterFactory, MeteredPhase, Phase, PlannedRun, SegmentOutcome, Start, TrainSegment,
     TrainSegments, prepare, wipe, write_curve, write_run_files, write_train_system,
@@ -279,6 +280,8 @@ pub struct ExternalRun {
     curve: LearningCurve,
     checkpoints: BTreeMap<u64, PathBuf>,
     warnings: Vec<String>,
+    /// Held from `begin` to `finish` (or drop): no other trainer takes the directory meanwhile.
+    lock: TrainingLock,
 }
 
 impl std::fmt::Debug for ExternalRun {
@@ -294,6 +297,9 @@ impl ExternalRun {
     /// Creates the run directory of `plan` and `seed` exactly as [`train`](crate::train())
     /// would (an unfinished run of the same or another configuration is started again, with a
     /// warning in the second case; a complete one is refused), and starts the training meters.
+    /// The run holds the directory's training lock until it finishes or is dropped; a
+    /// directory another trainer holds is refused with [`PipelineError::Locked`] (see
+    /// [`run_lock`](crate::run_lock)).
     pub fn begin(
         registry: &Registry,
         plan: ExperimentPlan,
@@ -316,6 +322,7 @@ impl ExternalRun {
             ))
         };
         let planned = PlannedRun::new(registry, &job, job.plan.algorithm.clone(), Some(agent))?;
+        let lock = TrainingLock::acquire(&dir)?;
         let mut warnings = Vec::new();
         match prepare(&run, &planned.record_json, &mut warnings)? {
             Start::Skip => return Err(complete()),
@@ -352,6 +359,7 @@ impl ExternalRun {
             curve: LearningCurve::default(),
             checkpoints: BTreeMap::new(),
             warnings,
+            lock,
         })
     }
 
@@ -482,6 +490,7 @@ impl ExternalRun {
             phase,
             mut segments,
             curve,
+            lock,
             ..
         } = self;
         let system = phase.finish();
@@ -519,6 +528,7 @@ impl ExternalRun {
             write_train_system(&run, &segments)?;
         }
         run.set_status(state, &note)?;
+        drop(lock);
         if no_curve {
             return Err(PipelineError::Invalid(format!(
                 "{}: marked failed: the agent logged no evaluation (call run.log_evaluation or \

@@ -123,7 +123,7 @@ pub fn infer_run(registry: &Registry, dir: &Path, opts: &InferOptions) -> Result
 
 /// [`infer_run`] with the run's final policy taken from `policies` (for an external agent, a
 /// front end's policy; see [`PolicySource`]). Every `act` call is timed the same way (after the
-/// policy's [`Policy::prepare`](a2perf_core::Policy::prepare), outside the timer). A failed
+/// policy's [`Policy::prepare`], outside the timer). A failed
 /// rollout (an error naming its episode and step) writes nothing: no `inference.json`, and the
 /// meters' `inference_emissions.csv` is left as it was.
 pub fn infer_run_with(

@@ -3,9 +3,9 @@
 //! The benchmark pipelines as a library: plan, train, infer, generalize, collect and report,
 //! plus the registry of every built-in environment and algorithm. The `a2perf` command
 //! (`a2perf-cli`) and the Python package (`python/`) are two front ends over it; a participant's
-//! own binary or test can call it with its own [`Registry`](a2perf_core::Registry):
+//! own binary or test can call it with its own [`Registry`]:
 //!
-//! - [`train`]: one run per (task, algorithm, seed), resumable, shardable;
+//! - [`train()`]: one run per (task, algorithm, seed), resumable, shardable;
 //! - [`infer_run`]: rollouts and per-call inference time of a trained policy;
 //! - [`generalize_run`]: returns on every task of the domain's generalization suite;
 //! - [`collect`]: checkpoint evaluation, expertise levels and offline datasets;
@@ -44,6 +44,7 @@
 //! | `inference.json` | infer | rollout returns, per-call inference time, meters |
 //! | `generalization.json` | generalize | per-task mean returns and their sum |
 //! | `collect/` | collect | checkpoint evaluations, expertise levels, datasets |
+//! | `train.lock` | train | the training lock ([`run_lock`]): the pid and host of the process training the run, empty when none does |
 
 #![warn(missing_docs)]
 
@@ -76,6 +77,7 @@ pub mod progress;
 pub mod registry;
 pub mod report;
 pub mod run;
+pub mod run_lock;
 pub mod stats;
 pub mod sysinfo;
 pub mod train;
@@ -168,6 +170,10 @@ pub enum PipelineError {
     /// Cancelled (Ctrl-C); the state on disk is resumable.
     #[error("cancelled; rerun the same command to resume")]
     Cancelled,
+    /// Run directories that another trainer holds (see [`run_lock`]): left alone, neither
+    /// trained nor treated as complete.
+    #[error("{}", .0.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))]
+    Locked(Vec<run_lock::LockedRun>),
 }
 
 impl From<ResultsError> for PipelineError {

@@ -80,7 +80,9 @@ pub fn recorded_bootstrap_reps(dirs: &[PathBuf]) -> Result<usize> {
     Ok(MetricSettings::default().bootstrap_reps)
 }
 
-/// Turns a training summary into an error when runs were cancelled or failed.
+/// Turns a training summary into an error when runs were cancelled, failed, or left alone because
+/// another trainer holds them ([`PipelineError::Locked`]: they are not complete, so nothing may
+/// infer or report them as if they were).
 pub fn check_trained(summary: &TrainSummary, cancel: &CancelToken) -> Result<()> {
     if cancel.is_cancelled() {
         return Err(PipelineError::Cancelled);
@@ -96,6 +98,10 @@ pub fn check_trained(summary: &TrainSummary, cancel: &CancelToken) -> Result<()>
             failures.len(),
             list.join("; ")
         )));
+    }
+    let locked = summary.locked();
+    if !locked.is_empty() {
+        return Err(PipelineError::Locked(locked));
     }
     Ok(())
 }

@@ -20,6 +20,7 @@ use a2perf_core::{
 use serde::{Deserialize, Serialize};
 
 use super::plan::{ExperimentPlan, MetricSettings, RunJob};
+use super::run_lock::{LockHolder, LockedRun, TRAIN_LOCK_FILE, TrainingLock};
 use super::{
     CHECKPOINT_DIR, CURVE_CSV, CURVE_JSON, OPERATIVE_FILE, POLICY_FILE, PipelineError, RESUME_DIR,
     RUN_FILE, RUN_FORMAT_VERSION, Result, RunRecord, SYSTEM_INFO_FILE, SystemInfo,
@@ -114,6 +115,9 @@ pub enum RunOutcome {
     Cancelled,
     /// Training failed; the directory is marked `failed` with the reason.
     Failed(String),
+    /// Left alone: another trainer holds the run directory's training lock (see
+    /// [`run_lock`](crate::run_lock)); the holder as it recorded itself.
+    Locked(Option<LockHolder>),
 }
 
 /// Outcome of [`train`].
@@ -317,6 +321,20 @@ impl TrainSummary {
             .collect()
     }
 
+    /// Runs left alone because another trainer holds them, with the holder.
+    pub fn locked(&self) -> Vec<LockedRun> {
+        self.runs
+            .iter()
+            .filter_map(|(p, o)| match o {
+                RunOutcome::Locked(holder) => Some(LockedRun {
+                    run: p.clone(),
+                    holder: holder.clone(),
+                }),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// Failed runs and why.
     pub fn failures(&self) -> Vec<(&Path, &str)> {
         self.runs
@@ -460,6 +478,10 @@ pub fn preflight(registry: &Registry, jobs: &[RunJob]) -> Result<()> {
 /// algorithm does not save resume points) or their configuration changed. Either way the result
 /// is the same as an uninterrupted run's (training is deterministic, and resumption is exact).
 ///
+/// Each run is trained under its directory's exclusive training lock
+/// ([`run_lock`](crate::run_lock)); a run another trainer holds is left alone and reported as
+/// [`RunOutcome::Locked`] with the holder's pid and host.
+///
 /// Returns an error only for problems that stop everything (unknown environment, unwritable
 /// output); a run that fails is reported in the summary and leaves the others going.
 pub fn train(registry: &Registry, jobs: &[RunJob], opts: &TrainOptions) -> Result<TrainSummary> {
@@ -545,9 +567,23 @@ pub(crate) enum Start {
     Resume(Box<ResumePoint>, TrainSegments),
 }
 
+/// Empties the run directory, keeping its training lock file: the lock lives on that file, and
+/// a rival that opened it must still find it locked.
 pub(crate) fn wipe(run: &RunDir) -> Result<()> {
     let path = run.path();
-    std::fs::remove_dir_all(path).map_err(io_err(path))?;
+    for entry in std::fs::read_dir(path).map_err(io_err(path))? {
+        let entry = entry.map_err(io_err(path))?;
+        if entry.file_name() == TRAIN_LOCK_FILE {
+            continue;
+        }
+        let p = entry.path();
+        let removed = if entry.file_type().map_err(io_err(&p))?.is_dir() {
+            std::fs::remove_dir_all(&p)
+        } else {
+            std::fs::remove_file(&p)
+        };
+        removed.map_err(io_err(&p))?;
+    }
     Ok(())
 }
 
@@ -592,7 +628,9 @@ pub(crate) fn prepare(
             }
             None => {
                 let mut entries = std::fs::read_dir(path).map_err(io_err(path))?;
-                if entries.next().is_some() {
+                // The training lock file is this trainer's own.
+                let foreign = entries.any(|e| !e.is_ok_and(|e| e.file_name() == TRAIN_LOCK_FILE));
+                if foreign {
                     return Err(PipelineError::Invalid(format!(
                         "{}: exists, is not empty and has no status.json; refusing to overwrite \
                          it (move it away or choose another output directory)",
@@ -767,6 +805,18 @@ pub fn train_run(registry: &Registry, job: &RunJob, opts: &TrainOptions) -> Resu
     if dir.exists() && run.status()?.is_some_and(|s| s.state.is_complete()) {
         return Ok(skipped);
     }
+    // Held until this function returns; `prepare` reads the status again under the lock.
+    let _lock = match TrainingLock::acquire(&dir) {
+        Ok(lock) => lock,
+        Err(PipelineError::Locked(mut runs)) => {
+            return Ok(RunReport {
+                outcome: RunOutcome::Locked(runs.pop().and_then(|r| r.holder)),
+                resumed_from: None,
+                warnings: Vec::new(),
+            });
+        }
+        Err(e) => return Err(e),
+    };
     let algo_entry = registry.algorithm(&plan.algorithm.name)?;
     let algo_params = a2perf_core::Params::resolve(&algo_entry.params, &plan.algorithm.params)
         .map_err(|source| a2perf_core::RegistryError::Param {

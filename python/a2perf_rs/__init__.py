@@ -19,7 +19,7 @@ import json
 from typing import Any
 
 from . import _native, circuit, metrics
-from ._native import BackendError
+from ._native import BackendError, RunLockedError
 from .envs import A2PerfEnv, env_ids, env_params, register_all
 from .harness import TrainingRun, collect, generalize, infer, report
 from .vector import A2PerfVectorEnv
@@ -30,6 +30,7 @@ __all__ = [
     "A2PerfEnv",
     "A2PerfVectorEnv",
     "BackendError",
+    "RunLockedError",
     "TrainingRun",
     "circuit",
     "collect",

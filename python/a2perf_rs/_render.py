@@ -30,7 +30,7 @@ def _domain(env_id: str) -> str | None:
     return None
 
 
-def _metadata_of_domain(domain: str | None) -> dict[str, Any]:
+def metadata_of_domain(domain: str | None) -> dict[str, Any]:
     meta = RENDER_METADATA.get(domain or "", {"render_modes": [], "render_fps": None})
     return {"render_modes": list(meta["render_modes"]), "render_fps": meta["render_fps"]}
 
@@ -42,7 +42,7 @@ def render_metadata(env_id: str) -> dict[str, Any]:
     domain = _domain(bare)
     if domain is None:
         raise gym.error.UnregisteredEnv(f"no a2perf environment {env_id!r}")
-    return _metadata_of_domain(domain)
+    return metadata_of_domain(domain)
 
 
 def checked_metadata(env_id: str, render_mode: str | None) -> dict[str, Any]:
@@ -51,7 +51,7 @@ def checked_metadata(env_id: str, render_mode: str | None) -> dict[str, Any]:
     a browser first). An unknown id gets no render modes here and no check: building it then
     raises the registry's error, which names the id with a did-you-mean."""
     domain = _domain(env_id)
-    meta = _metadata_of_domain(domain)
+    meta = metadata_of_domain(domain)
     if render_mode is not None and domain is not None:
         check_render_mode(env_id, render_mode, meta["render_modes"])
     return meta

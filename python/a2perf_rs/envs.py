@@ -50,13 +50,22 @@ id does not have raises ``ValueError`` naming the ones it has. ``metadata["rende
 
 from __future__ import annotations
 
+import dataclasses
+import os
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 
 from . import _native
-from ._render import NAMESPACE, check_render_mode, checked_metadata, render_metadata
+from ._render import (
+    NAMESPACE,
+    check_render_mode,
+    checked_metadata,
+    metadata_of_domain,
+    render_metadata,
+)
 from .spaces import to_gymnasium
 from .vector import A2PerfVectorEnv
 
@@ -100,7 +109,8 @@ class A2PerfEnv(gym.Env[Any, Any]):
             params,
             illegal_action=illegal_action,
             illegal_action_reward=illegal_action_reward,
-            episode_seeds=episode_seeds,
+            # A spec read back from JSON holds the pair as a list.
+            episode_seeds=None if episode_seeds is None else tuple(episode_seeds),
         )
         modes = list(self._native.render_modes())
         if render_mode is not None:
@@ -152,23 +162,68 @@ class A2PerfEnv(gym.Env[Any, Any]):
         if native is not None:
             native.close()
 
+    @property  # type: ignore[override]
+    def spec(self) -> EnvSpec | None:
+        """The Gymnasium spec ``gymnasium.make`` gave this environment, its kwargs plain JSON
+        data (paths as ``str``, numpy values as Python numbers and lists) so that
+        ``spec.to_json()``, pickling and ``gymnasium.make(spec)`` work."""
+        return self.__dict__.get("_spec")
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        if value is not None:
+            kwargs = {k: _json_value(v) for k, v in value.kwargs.items()}
+            value = dataclasses.replace(value, kwargs=kwargs)
+        self.__dict__["_spec"] = value
+
     def __repr__(self) -> str:
         return f"A2PerfEnv({self.env_id!r})"
 
 
-class _EnvCreator:
-    """The Gymnasium entry point of one id: builds an :class:`A2PerfEnv`, and carries the id's
-    ``metadata``, which ``gymnasium.make`` reads to check ``render_mode`` (and to offer the
-    ``"<mode>_list"`` and ``"human"`` wrappers)."""
+def _json_value(value: Any) -> Any:
+    """``value`` as plain JSON data where it is a path or a numpy scalar/array (what a user
+    naturally passes as a parameter), so that the spec's ``to_json`` works; else unchanged."""
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_json_value(v) for v in value]
+    return value
 
-    def __init__(self, metadata: dict[str, Any]) -> None:
-        self.metadata = metadata
 
-    def __call__(self, **kwargs: Any) -> A2PerfEnv:
-        return A2PerfEnv(**kwargs)
+class CircuitTrainingEnv(A2PerfEnv):
+    """The entry point of the ``CircuitTraining-*`` ids (an :class:`A2PerfEnv`)."""
 
-    def __repr__(self) -> str:
-        return f"{__name__}.A2PerfEnv"
+    domain = "circuit_training"
+    metadata = metadata_of_domain(domain)
+
+
+class QuadrupedLocomotionEnv(A2PerfEnv):
+    """The entry point of the ``QuadrupedLocomotion-*`` ids (an :class:`A2PerfEnv`)."""
+
+    domain = "quadruped_locomotion"
+    metadata = metadata_of_domain(domain)
+
+
+class WebNavigationEnv(A2PerfEnv):
+    """The entry point of the ``WebNavigation-*`` ids (an :class:`A2PerfEnv`)."""
+
+    domain = "web_navigation"
+    metadata = metadata_of_domain(domain)
+
+
+# Entry points are "module:attr" strings, as for every Gymnasium environment, so that specs
+# serialize (`EnvSpec.to_json`, pickle, Minari datasets) and `gymnasium.make(spec)` rebuilds them.
+# The class of a domain carries its render metadata, which `gymnasium.make` reads from the
+# entry point to check `render_mode` (and to offer the "<mode>_list" and "human" wrappers)
+# before building anything; a domain without a class of its own gets `A2PerfEnv`.
+_DOMAIN_ENTRY_POINTS = {
+    cls.domain: f"{__name__}:{cls.__name__}"
+    for cls in (CircuitTrainingEnv, QuadrupedLocomotionEnv, WebNavigationEnv)
+}
+_GENERIC_ENTRY_POINT = f"{__name__}:A2PerfEnv"
+_VECTOR_ENTRY_POINT = f"{A2PerfVectorEnv.__module__}:{A2PerfVectorEnv.__name__}"
 
 
 def env_params(env_id: str) -> list[tuple[str, str, list[str], Any, str]]:
@@ -188,14 +243,14 @@ def env_ids() -> list[str]:
 
 def register_all() -> None:
     """Registers every benchmark environment in Gymnasium's ``a2perf`` namespace (idempotent)."""
-    for entry_id, _kind, _summary, _params in _native.env_entries():
+    for entry_id, domain, _summary, _params in _native.env_entries():
         full = f"{NAMESPACE}/{entry_id}"
         if full in gym.registry:
             continue
         gym.register(
             id=full,
-            entry_point=_EnvCreator(render_metadata(entry_id)),
-            vector_entry_point=A2PerfVectorEnv,
+            entry_point=_DOMAIN_ENTRY_POINTS.get(domain, _GENERIC_ENTRY_POINT),
+            vector_entry_point=_VECTOR_ENTRY_POINT,
             kwargs={"env_id": entry_id},
             # Episode limits depend on parameters (web `step_limit`, circuit macros, locomotion
             # `episode_steps`); the environments truncate themselves at their spec's limit.

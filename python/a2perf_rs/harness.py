@@ -101,6 +101,12 @@ class TrainingRun:
     ``a2perf report`` lists such runs as left out with the reason. Running the same run again
     starts it from scratch; a complete run is refused.
 
+    One trainer per run: entering takes the run directory's exclusive training lock (the lock
+    ``a2perf train`` takes), held until the block is left. A run another process (or another
+    ``TrainingRun`` of this one) is training raises :class:`a2perf_rs.RunLockedError` naming that
+    trainer's pid and host, and leaves the directory alone. A trainer that dies, even by
+    ``kill -9``, releases the lock with its process.
+
     Args:
         out_dir: The output root (as a config's ``output.dir``).
         algorithm: The agent's name, the report's column (not a built-in algorithm's name).

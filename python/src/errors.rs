@@ -15,6 +15,14 @@ create_exception!(
     "An environment's backend (e.g. the Chromium browser) failed."
 );
 
+create_exception!(
+    _native,
+    RunLockedError,
+    PyRuntimeError,
+    "Another trainer (a process whose pid and host the message names) holds the run directory's \
+     training lock: the run was left alone."
+);
+
 /// `EnvError` → `ValueError` for actions and parameters, `FileNotFoundError`/`ValueError` for
 /// files, `BackendError` for a failed backend, `RuntimeError` for a call out of order.
 pub fn env_error(e: EnvError) -> PyErr {

@@ -11,6 +11,19 @@
 //! [`policy`] (Python callables as policies); [`convert`] and [`errors`] hold the conversions and
 //! the exception mapping they share.
 //!
+//! From Python (this crate cannot run Rust doc tests: it links against the interpreter that
+//! loads it, which is why `pyproject.toml` builds it and `python/tests/` tests it):
+//!
+//! ```python
+//! import gymnasium as gym
+//! import a2perf_rs  # registers the `a2perf/` ids
+//!
+//! env = gym.make("a2perf/QuadrupedLocomotion-DogPace-v0", episode_steps=10)
+//! obs, info = env.reset(seed=0)
+//! obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+//! assert gym.make(env.spec).reset(seed=0)[0].tolist() == env.reset(seed=0)[0].tolist()
+//! ```
+//!
 //! It deliberately holds no benchmark logic of its own: environments come from
 //! `a2perf_pipeline::registry`, metrics from `a2perf-metrics`, costs from `a2perf-circuit`, the
 //! harness from `a2perf_pipeline::external` and the pipelines.
@@ -100,6 +113,10 @@ fn chromium_unavailable_reason() -> Option<String> {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("BackendError", m.py().get_type::<errors::BackendError>())?;
+    m.add(
+        "RunLockedError",
+        m.py().get_type::<errors::RunLockedError>(),
+    )?;
     m.add_function(wrap_pyfunction!(env_entries, m)?)?;
     m.add_function(wrap_pyfunction!(chromium_unavailable_reason, m)?)?;
     m.add_function(wrap_pyfunction!(bench_env, m)?)?;

@@ -287,7 +287,8 @@ fn relocated(py: Python<'_>, prefix: &str, failure: PolicyFailure, in_rollout: b
 /// A pipeline error as a Python exception: a policy's own failure (kept in `errors`) comes back
 /// as its exception type, named by run, episode and step; the rest map by kind (`ValueError`
 /// for bad requests and files, `FileNotFoundError`/`OSError` for i/o, `TypeError` for
-/// parameters, `RuntimeError` for failed rollouts).
+/// parameters, `RuntimeError` for failed rollouts, `RunLockedError` for a run directory another
+/// trainer holds).
 pub fn pipeline_error(e: PipelineError, errors: Option<&ErrorSlot>) -> PyErr {
     let failure = errors.and_then(|s| s.lock().ok().and_then(|mut f| f.take()));
     Python::attach(|py| {
@@ -319,6 +320,7 @@ pub fn pipeline_error(e: PipelineError, errors: Option<&ErrorSlot>) -> PyErr {
                 PyRuntimeError::new_err(msg)
             }
             PipelineError::Cancelled => PyKeyboardInterrupt::new_err(msg),
+            PipelineError::Locked(_) => crate::errors::RunLockedError::new_err(msg),
             PipelineError::Corrupt { .. } | PipelineError::Invalid(_) => PyValueError::new_err(msg),
         }
     })

@@ -66,8 +66,10 @@ def test_training_run_writes_what_a2perf_train_writes(tmp_path: Path) -> None:
     assert names == sorted([
         "checkpoints", "curve.csv", "curve.json", "operative_config.ron", "run.json",
         "status.json", "system_info.json", "train_emissions.csv", "train_segments.json",
-        "train_system.json",
+        "train_system.json", "train.lock",
     ])
+    # The training lock was released and its record emptied when the block was left.
+    assert (run.run_dir / "train.lock").read_text() == ""
     record = read(run.run_dir / "run.json")
     assert record["algorithm"] == {"name": "py-agent",
                                    "params": {"hidden": [8, 8], "lr": 0.1, "tag": "x"}}
@@ -382,3 +384,49 @@ def test_collect_loads_python_checkpoints(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match=r"load_policy failed: FileNotFoundError"):
         a2perf_rs.collect(tmp_path / "py-agent", lambda path: open("/nonexistent/x"),
                           tmp_path / "d4", eval_episodes=1, dataset_episodes=1)
+
+
+def test_a_run_being_trained_is_refused_naming_its_trainer(tmp_path: Path) -> None:
+    import os
+    import socket
+    import subprocess
+    import sys
+    import textwrap
+
+    # Another process trains the run (its block is open); this one may not.
+    holder = subprocess.Popen(
+        [sys.executable, "-c", textwrap.dedent(f"""
+            import sys, a2perf_rs
+            with a2perf_rs.TrainingRun({str(tmp_path)!r}, algorithm="py-agent", env_id={WEB!r},
+                                       env_params={WEB_PARAMS!r}) as run:
+                print("holding", flush=True)
+                sys.stdin.readline()
+                run.log_evaluation(10, 0.0, 0.0)
+        """)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        rival = training_run(tmp_path)
+        with pytest.raises(a2perf_rs.RunLockedError) as caught:
+            rival.__enter__()
+        text = str(caught.value)
+        assert f"pid {holder.pid} on " in text and str(rival.run_dir) in text, text
+        assert socket.gethostname() in text or "unknown host" in text, text
+        # Left alone: the holder's run is still running, and finishes normally.
+        assert read(rival.run_dir / "status.json")["state"] == "running"
+        holder.stdin.write("\n")
+        holder.stdin.flush()
+        assert holder.wait(timeout=60) == 0
+    finally:
+        if holder.poll() is None:
+            holder.kill()
+            holder.wait()
+    assert read(rival.run_dir / "status.json")["state"] == "complete"
+    # Released with its process: a second block of this process takes the lock, and a block of
+    # the same run in this process refuses a third one.
+    first = training_run(tmp_path, seed=1)
+    with first:
+        with pytest.raises(a2perf_rs.RunLockedError, match=f"pid {os.getpid()} on "):
+            training_run(tmp_path, seed=1).__enter__()
+        first.log_evaluation(10, 0.0, 0.0)

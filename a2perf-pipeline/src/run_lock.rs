@@ -1,0 +1,164 @@
+//! One trainer per run directory.
+//!
+//! Whatever trains a run — `a2perf train`, `a2perf run`, a Python `TrainingRun` — first takes an
+//! exclusive advisory lock (`flock`) on the run's [`TRAIN_LOCK_FILE`], and keeps it until it
+//! stops. A second trainer of the same directory, in this process or another one on a machine
+//! sharing the file system's locks, does not wait: it gets [`PipelineError::Locked`] naming the
+//! holder's pid and host, which the trainer writes into the file once it holds the lock.
+//!
+//! The kernel releases the lock when the process ends, however it ends (`kill -9` included), so
+//! a lock file left behind never blocks anyone: only the lock means something, the file's
+//! contents are for messages.
+//!
+//! ```
+//! use a2perf_pipeline::{PipelineError, run_lock::TrainingLock};
+//! let dir = tempfile::tempdir().unwrap();
+//! let first = TrainingLock::acquire(dir.path()).unwrap();
+//! match TrainingLock::acquire(dir.path()) {
+//!     Err(PipelineError::Locked(runs)) => {
+//!         assert_eq!(runs[0].holder.as_ref().map(|h| h.pid), Some(std::process::id()));
+//!     }
+//!     other => panic!("expected the lock to be held, got {other:?}"),
+//! }
+//! drop(first);
+//! assert!(TrainingLock::acquire(dir.path()).is_ok());
+//! ```
+
+use std::fs::{File, OpenOptions, TryLockError};
+use std::io::{Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use super::{PipelineError, Result, io_err};
+
+/// `train.lock`: the lock file of a run directory (see the [module documentation](self)).
+pub const TRAIN_LOCK_FILE: &str = "train.lock";
+
+/// The process that holds a run directory's training lock, as it recorded itself.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LockHolder {
+    /// Its process id.
+    pub pid: u32,
+    /// The host it runs on.
+    pub host: String,
+}
+
+impl LockHolder {
+    /// This process.
+    pub fn current() -> Self {
+        Self {
+            pid: std::process::id(),
+            host: sysinfo::System::host_name().unwrap_or_else(|_| "unknown host".into()),
+        }
+    }
+}
+
+impl std::fmt::Display for LockHolder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "pid {} on {}", self.pid, self.host)
+    }
+}
+
+/// A run directory left alone because another trainer holds its lock.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LockedRun {
+    /// The run directory.
+    pub run: PathBuf,
+    /// The holder, as it recorded itself (`None` when it had not yet done so).
+    pub holder: Option<LockHolder>,
+}
+
+impl std::fmt::Display for LockedRun {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let who = match &self.holder {
+            Some(h) => format!("another trainer ({h})"),
+            None => "another trainer (it has not recorded its pid and host yet)".into(),
+        };
+        write!(
+            f,
+            "{}: skipped: {who} holds its training lock ({TRAIN_LOCK_FILE}); run the same \
+             command again once that process has stopped",
+            self.run.display()
+        )
+    }
+}
+
+/// The exclusive training lock of one run directory, held until dropped (or the process ends).
+#[derive(Debug)]
+pub struct TrainingLock {
+    file: File,
+    path: PathBuf,
+}
+
+impl TrainingLock {
+    /// Takes the training lock of the run directory `dir` (creating the directory when it does
+    /// not exist) and records this process in it. When another trainer holds it, returns
+    /// [`PipelineError::Locked`] at once, with the holder it recorded.
+    pub fn acquire(dir: &Path) -> Result<Self> {
+        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let path = dir.join(TRAIN_LOCK_FILE);
+        // Never truncated on open: the holder's record must survive a rival's attempt.
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io_err(&path))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(TryLockError::WouldBlock) => {
+                return Err(PipelineError::Locked(vec![LockedRun {
+                    run: dir.to_path_buf(),
+                    holder: read_holder(&mut file),
+                }]));
+            }
+            Err(TryLockError::Error(source)) => return Err(PipelineError::Io { path, source }),
+        }
+        // Written in place, never replaced by a rename: the lock belongs to this inode.
+        let record =
+            serde_json::to_vec(&LockHolder::current()).map_err(|e| PipelineError::Corrupt {
+                path: path.clone(),
+                reason: e.to_string(),
+            })?;
+        file.set_len(0)
+            .and_then(|()| file.seek(SeekFrom::Start(0)))
+            .and_then(|_| file.write_all(&record))
+            .and_then(|()| file.flush())
+            .map_err(io_err(&path))?;
+        Ok(Self { file, path })
+    }
+
+    /// The lock file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for TrainingLock {
+    fn drop(&mut self) {
+        // An emptied file tells a reader that nobody trains the run now; the lock itself is
+        // released when the file is closed, right after.
+        let _ = self.file.set_len(0);
+    }
+}
+
+/// The holder's record. A holder that has just taken the lock may not have written it yet, so
+/// an empty or partial record is read again for a moment before giving up.
+fn read_holder(file: &mut File) -> Option<LockHolder> {
+    let deadline = Instant::now() + Duration::from_secs(1);
+    loop {
+        let mut text = String::new();
+        let parsed = file
+            .seek(SeekFrom::Start(0))
+            .and_then(|_| file.read_to_string(&mut text))
+            .ok()
+            .and_then(|_| serde_json::from_str::<LockHolder>(&text).ok());
+        if parsed.is_some() || Instant::now() >= deadline {
+            return parsed;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
