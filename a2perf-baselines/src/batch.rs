@@ -396,3 +396,81 @@ impl ObsBatch {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use a2perf_core::Tensor;
+
+    fn layout() -> ObsLayout {
+        ObsLayout {
+            tensors: vec![("ids".into(), vec![2]), ("x".into(), vec![1])],
+            dtypes: vec![DType::I32, DType::F32],
+            num_actions: None,
+        }
+    }
+
+    #[test]
+    fn integer_rows_are_exact_and_floats_convert_for_flat_networks() {
+        let big = (1 << 24) + 1;
+        let mut b = ObsBatch::new(&layout());
+        let obs = Observation {
+            tensors: vec![
+                Tensor::new("ids", &[2], vec![big, 3]),
+                Tensor::new("x", &[1], vec![0.5f32]),
+            ],
+            action_mask: None,
+        };
+        b.push(&obs).unwrap();
+        assert!(b.is_integer(0) && !b.is_integer(1));
+        assert_eq!(b.ints(0), &[big, 3]);
+        assert_eq!(b.tensor(1), &[0.5]);
+        assert!(b.tensor(0).is_empty() && b.ints(1).is_empty());
+        let mut x = Vec::new();
+        b.concat_into(&mut x);
+        assert_eq!(x, vec![big as f32, 3.0, 0.5]);
+        // uint8 tensors widen into the integer rows.
+        let small = Observation {
+            tensors: vec![
+                Tensor::new("ids", &[2], vec![7u8, 255]),
+                Tensor::new("x", &[1], vec![1.0f32]),
+            ],
+            action_mask: None,
+        };
+        b.write_row(0, &small).unwrap();
+        assert_eq!(b.ints(0), &[7, 255]);
+    }
+
+    #[test]
+    fn a_tensor_of_the_wrong_type_is_refused_by_name() {
+        let mut b = ObsBatch::new(&layout());
+        let floats = Observation {
+            tensors: vec![
+                Tensor::new("ids", &[2], vec![1.0f32, 2.0]),
+                Tensor::new("x", &[1], vec![0.5f32]),
+            ],
+            action_mask: None,
+        };
+        let err = b.push(&floats).unwrap_err().to_string();
+        assert!(err.contains("`ids` is float32") && err.contains("int32"), "{err}");
+    }
+
+    #[test]
+    fn layouts_from_specs_carry_dtypes_and_refuse_int64() {
+        let spec = |dtype| EnvSpec {
+            id: "T-v0".into(),
+            observation_space: Space::Dict(vec![
+                ("a".into(), Space::uniform_box(&[1], 0.0, 1.0)),
+                ("b".into(), Space::uniform_box_of(&[2], dtype, 0.0, 9.0)),
+            ]),
+            action_space: Space::Discrete { n: 2 },
+            max_episode_steps: None,
+            metadata: Default::default(),
+        };
+        let l = ObsLayout::from_spec(&spec(DType::I32)).unwrap();
+        assert_eq!(l.dtypes, vec![DType::F32, DType::I32]);
+        assert!(l.same_shapes(&ObsLayout::floats(l.tensors.clone(), Some(2))));
+        let err = ObsLayout::from_spec(&spec(DType::I64)).unwrap_err().to_string();
+        assert!(err.contains("`b` is int64"), "{err}");
+    }
+}
