@@ -452,7 +452,10 @@ mod tests {
             action_mask: None,
         };
         let err = b.push(&floats).unwrap_err().to_string();
-        assert!(err.contains("`ids` is float32") && err.contains("int32"), "{err}");
+        assert!(
+            err.contains("`ids` is float32") && err.contains("int32"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -470,7 +473,9 @@ mod tests {
         let l = ObsLayout::from_spec(&spec(DType::I32)).unwrap();
         assert_eq!(l.dtypes, vec![DType::F32, DType::I32]);
         assert!(l.same_shapes(&ObsLayout::floats(l.tensors.clone(), Some(2))));
-        let err = ObsLayout::from_spec(&spec(DType::I64)).unwrap_err().to_string();
+        let err = ObsLayout::from_spec(&spec(DType::I64))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("`b` is int64"), "{err}");
     }
 }

@@ -326,15 +326,19 @@ impl DiscreteArch {
     pub fn check_dtypes(&self, layout: &ObsLayout) -> Result<(), String> {
         let fits = match self {
             DiscreteArch::Flat { .. } => true,
-            DiscreteArch::Circuit(c) => !layout.is_integer(c.features) && !layout.is_integer(c.grid),
+            DiscreteArch::Circuit(c) => {
+                !layout.is_integer(c.features) && !layout.is_integer(c.grid)
+            }
             DiscreteArch::Web(w) => web_dtypes_fit(layout, &w.idx),
         };
         if fits {
             Ok(())
         } else {
-            Err("the environment's tensor types (int32 ids, float32 features) differ from what \
+            Err(
+                "the environment's tensor types (int32 ids, float32 features) differ from what \
                  the network reads"
-                .into())
+                    .into(),
+            )
         }
     }
 }

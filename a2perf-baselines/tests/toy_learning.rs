@@ -234,7 +234,13 @@ fn bandit_oracle_dataset(n: usize) -> Dataset {
     let mut samples = Vec::new();
     for i in 0..n {
         let obs = env.reset(Some(i as u64)).unwrap();
-        let ctx = obs.tensors[0].data.as_f32().unwrap().iter().position(|v| *v > 0.5).unwrap();
+        let ctx = obs.tensors[0]
+            .data
+            .as_f32()
+            .unwrap()
+            .iter()
+            .position(|v| *v > 0.5)
+            .unwrap();
         samples.push(Sample {
             observation: obs,
             action: Action::Discrete(MaskedBandit::best(ctx)),

@@ -651,22 +651,14 @@ impl CircuitEnv {
             return;
         };
         // The slots were just given these types, so the typed views exist.
-        let (
-            Some(feat),
-            Some(grid_t),
-            Some(loc_x),
-            Some(loc_y),
-            Some(placed_t),
-            Some(current_t),
-        ) = (
+        let (Some(feat), Some(grid_t), Some(loc_x), Some(loc_y), Some(placed_t), Some(current_t)) = (
             features.data.as_f32_mut(),
             grid.data.as_f32_mut(),
             loc_x.data.as_f32_mut(),
             loc_y.data.as_f32_mut(),
             placed_t.data.as_i32_mut(),
             current_t.data.as_i32_mut(),
-        )
-        else {
+        ) else {
             return;
         };
         // Density and congestion per cell (congestion on the congestion grid mapped by centre).

@@ -215,7 +215,10 @@ fn toy_macro_with_shared_files() {
     // Golden mask example: MR (node 1) first, 108 legal cells (rows 2..7 x cols 1..18).
     let mask = obs.action_mask.clone().unwrap();
     assert_eq!(mask.iter().filter(|m| **m).count(), 108);
-    assert_eq!(obs.tensor("current_node").unwrap().data.as_i32(), Some(&[1][..]));
+    assert_eq!(
+        obs.tensor("current_node").unwrap().data.as_i32(),
+        Some(&[1][..])
+    );
     // Cell 41 -> padded action (41/20 + 59)*128 + 41%20 + 54 = 7863 (golden log).
     let step = env.step(&Action::Discrete(7863)).unwrap();
     assert!(!step.done());

@@ -171,7 +171,10 @@ impl Space {
                 v.len() == low.len()
                     && v.iter().zip(low.iter().zip(high)).all(|(x, (l, h))| {
                         let x = f64::from(*x);
-                        x.is_finite() && x >= *l && x <= *h && (!dtype.is_integer() || x.fract() == 0.0)
+                        x.is_finite()
+                            && x >= *l
+                            && x <= *h
+                            && (!dtype.is_integer() || x.fract() == 0.0)
                     })
             }
             _ => false,
@@ -406,8 +409,8 @@ mod tests {
 
     #[test]
     fn serialized_boxes_state_their_dtype() {
-        let json = serde_json::to_string(&Space::uniform_box_of(&[1], DType::I32, 0.0, 9.0))
-            .unwrap();
+        let json =
+            serde_json::to_string(&Space::uniform_box_of(&[1], DType::I32, 0.0, 9.0)).unwrap();
         assert!(json.contains("\"dtype\":\"i32\""), "{json}");
         // A box written before spaces were typed was a float box.
         let old = r#"{"Box":{"low":[0.0],"high":[1.0],"shape":[1]}}"#;

@@ -381,7 +381,10 @@ mod tests {
             v
         };
         assert_eq!(bits(&TensorData::I32(vec![-1])), vec![u64::from(u32::MAX)]);
-        assert_eq!(bits(&TensorData::F32(vec![1.0])), vec![u64::from(1f32.to_bits())]);
+        assert_eq!(
+            bits(&TensorData::F32(vec![1.0])),
+            vec![u64::from(1f32.to_bits())]
+        );
     }
 
     #[test]

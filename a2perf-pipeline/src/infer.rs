@@ -83,11 +83,9 @@ pub fn random_observation(
     fn fill(name: &str, space: &Space, rng: &mut RngStream, out: &mut Vec<Tensor>) {
         match space {
             Space::Box { .. } => out.extend(space.sample_tensor(name, rng)),
-            Space::Discrete { n } => out.push(Tensor::new(
-                name,
-                &[1],
-                vec![rng.index((*n).max(1)) as i32],
-            )),
+            Space::Discrete { n } => {
+                out.push(Tensor::new(name, &[1], vec![rng.index((*n).max(1)) as i32]))
+            }
             Space::Dict(items) => {
                 for (k, s) in items {
                     fill(k, s, rng, out);

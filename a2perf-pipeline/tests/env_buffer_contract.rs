@@ -156,7 +156,11 @@ fn outside(space: &Space, obs: &Observation) -> Option<String> {
         return (!space.contains_observation(obs)).then(|| format!("{:?}", obs.tensors));
     };
     if obs.tensors.len() != items.len() {
-        return Some(format!("{} tensors for {} boxes", obs.tensors.len(), items.len()));
+        return Some(format!(
+            "{} tensors for {} boxes",
+            obs.tensors.len(),
+            items.len()
+        ));
     }
     items.iter().zip(&obs.tensors).find_map(|((name, b), t)| {
         let Space::Box { shape, dtype, .. } = b else {

@@ -664,10 +664,7 @@ impl WebNavEnv {
             }
         }
         for k in 0..f {
-            let (keys, vals) = (
-                &mut pk[k * t..(k + 1) * t],
-                &mut pv[k * t..(k + 1) * t],
-            );
+            let (keys, vals) = (&mut pk[k * t..(k + 1) * t], &mut pv[k * t..(k + 1) * t]);
             // `_dummy`'s value is None, which the original's tokenizer maps to no token.
             let field = match k.checked_sub(FIELD_OFFSET) {
                 None => Some((self.dummy_key.as_slice(), &[][..])),

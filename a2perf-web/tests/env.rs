@@ -159,7 +159,13 @@ fn the_navbar_menu_opens_and_its_links_are_distractors() {
     assert_eq!(env.dom().order.len(), before + 6);
     assert!((s.reward + 0.05).abs() < 1e-12);
     // Newly shown elements are flagged "new".
-    let feats = s.observation.tensor("dom_features").unwrap().data.as_f32().unwrap();
+    let feats = s
+        .observation
+        .tensor("dom_features")
+        .unwrap()
+        .data
+        .as_f32()
+        .unwrap();
     let new_count = (0..250).filter(|e| feats[e * 8 + 2] == 1.0).count();
     assert_eq!(new_count, 6);
     let link = env

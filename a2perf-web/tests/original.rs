@@ -330,7 +330,12 @@ fn a2perf_actions_follow_visit_group() {
     let fu = field_of(&env, "username");
     let s = act(&mut env, (u, fu, 1));
     assert!(close(s.reward, 0.25 - 0.05), "{}", s.reward);
-    let feats = s.observation.tensor("dom_features").unwrap().data.to_f32_vec();
+    let feats = s
+        .observation
+        .tensor("dom_features")
+        .unwrap()
+        .data
+        .to_f32_vec();
     assert!((0..250).all(|e| feats[e * 8] == 0.0));
     // Acting without a value (kind 0, or kind 1 with `_dummy`) clears the input: −1/4 − 0.05,
     // then nothing changes: −0.55.
@@ -409,13 +414,25 @@ fn a2perf_actions_repeat_the_stale_reward_on_a_missing_element() {
     assert!(close(s4.reward, 0.40), "{}", s4.reward);
     assert!(!s4.terminated && !s4.truncated);
     assert_eq!(
-        s4.observation.tensor("time_step").unwrap().data.to_f32_vec(),
+        s4.observation
+            .tensor("time_step")
+            .unwrap()
+            .data
+            .to_f32_vec(),
         [4.0 / 25.0]
     );
     // The page is unchanged.
     assert_eq!(
-        s4.observation.tensor("dom_tokens").unwrap().data.to_f32_vec(),
-        s3.observation.tensor("dom_tokens").unwrap().data.to_f32_vec()
+        s4.observation
+            .tensor("dom_tokens")
+            .unwrap()
+            .data
+            .to_f32_vec(),
+        s3.observation
+            .tensor("dom_tokens")
+            .unwrap()
+            .data
+            .to_f32_vec()
     );
     // Outside the action space is an error in both semantics.
     assert!(matches!(

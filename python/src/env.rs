@@ -408,7 +408,7 @@ impl ObsLayout {
             .collect()
     }
 
-/// Python observation over buffers made by [`ObsLayout::buffers`].
+    /// Python observation over buffers made by [`ObsLayout::buffers`].
     pub fn wrap<'py>(
         &self,
         py: Python<'py>,
@@ -511,9 +511,8 @@ impl ObsRecycler {
     /// when there is one. An observation whose tensors already hold their data (or that the
     /// environment has not built yet) is left alone.
     pub fn lend(&mut self, py: Python<'_>, layout: &ObsLayout, obs: &mut Observation) {
-        let holds = |t: &a2perf_core::Tensor, d: usize, ty: DType| {
-            t.data.len() == d && t.dtype() == ty
-        };
+        let holds =
+            |t: &a2perf_core::Tensor, d: usize, ty: DType| t.data.len() == d && t.dtype() == ty;
         if obs.tensors.len() != layout.dims.len()
             || obs
                 .tensors
@@ -536,7 +535,10 @@ impl ObsRecycler {
                 self.spare = Some(set);
             }
             None => {
-                for (t, (d, ty)) in obs.tensors.iter_mut().zip(layout.dims.iter().zip(&layout.dtypes))
+                for (t, (d, ty)) in obs
+                    .tensors
+                    .iter_mut()
+                    .zip(layout.dims.iter().zip(&layout.dtypes))
                 {
                     if !holds(t, *d, *ty) {
                         t.data = TensorData::zeros(*ty, *d);

@@ -5,7 +5,8 @@ use std::collections::BTreeMap;
 
 use a2perf_core::{
     Action, Algorithm, CancelToken, DType, DiscardCheckpoints, Env, EnvError, EnvSpec,
-    LearningCurve, Observation, Policy, RngStream, Space, Step, Tensor, TrainingContext, TrainingSettings, Value,
+    LearningCurve, Observation, Policy, RngStream, Space, Step, Tensor, TrainingContext,
+    TrainingSettings, Value,
 };
 
 /// One-step contextual bandit with masks: 4 contexts (one-hot), 6 arms; in context c, arms
@@ -280,7 +281,10 @@ impl MiniWeb {
                 Tensor {
                     name: "dom_features".into(),
                     shape: vec![e, 8],
-                    data: (0..e * 8).map(|_| rng.uniform_f32()).collect::<Vec<f32>>().into(),
+                    data: (0..e * 8)
+                        .map(|_| rng.uniform_f32())
+                        .collect::<Vec<f32>>()
+                        .into(),
                 },
                 Tensor {
                     name: "dom_mask".into(),
@@ -317,12 +321,18 @@ pub fn mini_circuit_obs(rng: &mut RngStream) -> Observation {
             Tensor {
                 name: "features".into(),
                 shape: vec![5],
-                data: (0..5).map(|_| rng.normal() as f32).collect::<Vec<f32>>().into(),
+                data: (0..5)
+                    .map(|_| rng.normal() as f32)
+                    .collect::<Vec<f32>>()
+                    .into(),
             },
             Tensor {
                 name: "grid".into(),
                 shape: vec![2, 3, 4],
-                data: (0..24).map(|_| rng.uniform_f32()).collect::<Vec<f32>>().into(),
+                data: (0..24)
+                    .map(|_| rng.uniform_f32())
+                    .collect::<Vec<f32>>()
+                    .into(),
             },
         ],
         action_mask: Some((0..12).map(|i| i % 5 != 0).collect()),
