@@ -1,29 +1,50 @@
 //! Observations packed into contiguous per-tensor rows, the input format of every network.
+//!
+//! Each tensor keeps its kind of values: `float32` tensors are `f32` rows (what float-consuming
+//! layers read, and what observation normalisation shifts), integer tensors (`int32`, and `uint8`
+//! widened) are exact `i32` rows, which embedding lookups read directly.
 
-use a2perf_core::{EnvSpec, Observation, PolicyError, Space};
+use a2perf_core::{DType, EnvSpec, Observation, PolicyError, Space, TensorData};
 use serde::{Deserialize, Serialize};
 
-/// Names and shapes of an environment's observation tensors, plus the discrete action count when
-/// actions may be masked.
+/// Names, shapes and element types of an environment's observation tensors, plus the discrete
+/// action count when actions may be masked.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ObsLayout {
     /// `(name, shape)` of each tensor, in observation-space order.
     pub tensors: Vec<(String, Vec<usize>)>,
+    /// Element type of each tensor (empty in layouts saved before observations were typed: then
+    /// every tensor is `float32`).
+    #[serde(default)]
+    pub dtypes: Vec<DType>,
     /// Number of discrete actions (mask width), `None` for continuous actions.
     pub num_actions: Option<usize>,
 }
 
 impl ObsLayout {
     /// The layout of `spec`'s observations. A `Box` observation is one tensor named `"obs"`.
+    /// `int64` tensors are refused: the baselines' integer rows are `i32`.
     pub fn from_spec(spec: &EnvSpec) -> Result<Self, PolicyError> {
         let mut tensors = Vec::new();
+        let mut dtypes = Vec::new();
+        let mut push = |name: &str, shape: Vec<usize>, dtype: DType| {
+            if dtype == DType::I64 {
+                return Err(PolicyError::BadObservation(format!(
+                    "tensor `{name}` is int64; the baselines take float32, int32 and uint8 \
+                     observations"
+                )));
+            }
+            tensors.push((name.to_string(), shape));
+            dtypes.push(dtype);
+            Ok(())
+        };
         match &spec.observation_space {
-            Space::Box { shape, .. } => tensors.push(("obs".to_string(), shape.clone())),
+            Space::Box { shape, dtype, .. } => push("obs", shape.clone(), *dtype)?,
             Space::Dict(items) => {
                 for (name, space) in items {
                     match space {
-                        Space::Box { shape, .. } => tensors.push((name.clone(), shape.clone())),
-                        Space::Discrete { .. } => tensors.push((name.clone(), vec![1])),
+                        Space::Box { shape, dtype, .. } => push(name, shape.clone(), *dtype)?,
+                        Space::Discrete { .. } => push(name, vec![1], DType::I32)?,
                         Space::Dict(_) => {
                             return Err(PolicyError::BadObservation(format!(
                                 "nested dict observation `{name}` is not supported"
@@ -32,7 +53,7 @@ impl ObsLayout {
                     }
                 }
             }
-            Space::Discrete { .. } => tensors.push(("obs".to_string(), vec![1])),
+            Space::Discrete { .. } => push("obs", vec![1], DType::I32)?,
         }
         let num_actions = match spec.action_space {
             Space::Discrete { n } => Some(n),
@@ -40,8 +61,41 @@ impl ObsLayout {
         };
         Ok(Self {
             tensors,
+            dtypes,
             num_actions,
         })
+    }
+
+    /// A layout of `float32` tensors.
+    ///
+    /// ```
+    /// use a2perf_baselines::ObsLayout;
+    /// let l = ObsLayout::floats(vec![("obs".into(), vec![2])], Some(3));
+    /// assert_eq!(l.total_dim(), 2);
+    /// ```
+    pub fn floats(tensors: Vec<(String, Vec<usize>)>, num_actions: Option<usize>) -> Self {
+        Self {
+            dtypes: vec![DType::F32; tensors.len()],
+            tensors,
+            num_actions,
+        }
+    }
+
+    /// Element type of tensor `i` (`float32` for layouts saved before observations were typed).
+    pub fn dtype(&self, i: usize) -> DType {
+        self.dtypes.get(i).copied().unwrap_or(DType::F32)
+    }
+
+    /// Whether tensor `i` holds integers (kept exact as `i32` rows in an [`ObsBatch`]).
+    pub fn is_integer(&self, i: usize) -> bool {
+        self.dtype(i).is_integer()
+    }
+
+    /// Whether `other` has the same tensor names, shapes and action count. Element types are not
+    /// compared: the networks read the same numbers whether ids are stored as floats or integers,
+    /// so a network saved before observations were typed runs on typed ones.
+    pub fn same_shapes(&self, other: &ObsLayout) -> bool {
+        self.tensors == other.tensors && self.num_actions == other.num_actions
     }
 
     /// Index of the tensor called `name`.
@@ -60,15 +114,48 @@ impl ObsLayout {
     }
 }
 
-/// A batch of observations: for each tensor a `[rows, dim]` buffer, and a `[rows, n]` action mask
-/// for discrete spaces (all `true` when the environment gives none).
+/// Rows of one tensor: `f32` for float tensors, exact `i32` for integer ones.
+#[derive(Clone, Debug)]
+enum Rows {
+    F32(Vec<f32>),
+    I32(Vec<i32>),
+}
+
+impl Rows {
+    fn len(&self) -> usize {
+        match self {
+            Rows::F32(v) => v.len(),
+            Rows::I32(v) => v.len(),
+        }
+    }
+
+    fn grow(&mut self, n: usize) {
+        match self {
+            Rows::F32(v) => v.resize(n, 0.0),
+            Rows::I32(v) => v.resize(n, 0),
+        }
+    }
+
+    /// Copies `src[from..from + n]` to `self[at..at + n]` (same kinds, by construction).
+    fn copy_range(&mut self, at: usize, src: &Rows, from: usize, n: usize) {
+        match (self, src) {
+            (Rows::F32(d), Rows::F32(s)) => d[at..at + n].copy_from_slice(&s[from..from + n]),
+            (Rows::I32(d), Rows::I32(s)) => d[at..at + n].copy_from_slice(&s[from..from + n]),
+            _ => {}
+        }
+    }
+}
+
+/// A batch of observations: for each tensor a `[rows, dim]` buffer (`f32` or exact `i32`, see the
+/// module documentation), and a `[rows, n]` action mask for discrete spaces (all `true` when the
+/// environment gives none).
 ///
 /// Buffers only grow, so refilling a batch of the same size allocates nothing.
 #[derive(Clone, Debug, Default)]
 pub struct ObsBatch {
     dims: Vec<usize>,
     names: Vec<String>,
-    data: Vec<Vec<f32>>,
+    data: Vec<Rows>,
     mask: Vec<bool>,
     mask_width: usize,
     len: usize,
@@ -79,7 +166,15 @@ impl ObsBatch {
     pub fn new(layout: &ObsLayout) -> Self {
         let dims: Vec<usize> = (0..layout.tensors.len()).map(|i| layout.dim(i)).collect();
         Self {
-            data: vec![Vec::new(); dims.len()],
+            data: (0..dims.len())
+                .map(|i| {
+                    if layout.is_integer(i) {
+                        Rows::I32(Vec::new())
+                    } else {
+                        Rows::F32(Vec::new())
+                    }
+                })
+                .collect(),
             names: layout.tensors.iter().map(|(n, _)| n.clone()).collect(),
             dims,
             mask: Vec::new(),
@@ -102,7 +197,7 @@ impl ObsBatch {
     pub fn resize(&mut self, rows: usize) {
         for (d, dim) in self.data.iter_mut().zip(&self.dims) {
             if d.len() < rows * dim {
-                d.resize(rows * dim, 0.0);
+                d.grow(rows * dim);
             }
         }
         if self.mask.len() < rows * self.mask_width {
@@ -124,7 +219,8 @@ impl ObsBatch {
         Ok(row)
     }
 
-    /// Overwrites row `row` (which must be `< len`) with `obs`.
+    /// Overwrites row `row` (which must be `< len`) with `obs`. A float tensor must be `float32`;
+    /// an integer tensor `int32` or `uint8`.
     pub fn write_row(&mut self, row: usize, obs: &Observation) -> Result<(), PolicyError> {
         let single = self.dims.len() == 1 && obs.tensors.len() == 1;
         for (i, name) in self.names.iter().enumerate() {
@@ -142,7 +238,25 @@ impl ObsBatch {
                     t.data.len()
                 )));
             }
-            self.data[i][row * dim..(row + 1) * dim].copy_from_slice(&t.data);
+            let at = row * dim..(row + 1) * dim;
+            match (&mut self.data[i], &t.data) {
+                (Rows::F32(d), TensorData::F32(s)) => d[at].copy_from_slice(s),
+                (Rows::I32(d), TensorData::I32(s)) => d[at].copy_from_slice(s),
+                (Rows::I32(d), TensorData::U8(s)) => d[at]
+                    .iter_mut()
+                    .zip(s)
+                    .for_each(|(d, s)| *d = i32::from(*s)),
+                (rows, data) => {
+                    let expected = match rows {
+                        Rows::F32(_) => "float32",
+                        Rows::I32(_) => "int32",
+                    };
+                    return Err(PolicyError::BadObservation(format!(
+                        "tensor `{name}` is {}, the policy expects {expected}",
+                        data.dtype()
+                    )));
+                }
+            }
         }
         let w = self.mask_width;
         if w > 0 {
@@ -164,8 +278,7 @@ impl ObsBatch {
     /// Copies row `src_row` of `src` (same layout) into row `row` of `self`.
     pub fn copy_row(&mut self, row: usize, src: &ObsBatch, src_row: usize) {
         for (i, dim) in self.dims.iter().enumerate() {
-            self.data[i][row * dim..(row + 1) * dim]
-                .copy_from_slice(&src.data[i][src_row * dim..(src_row + 1) * dim]);
+            self.data[i].copy_range(row * dim, &src.data[i], src_row * dim, *dim);
         }
         let w = self.mask_width;
         if w > 0 {
@@ -182,15 +295,43 @@ impl ObsBatch {
         }
     }
 
-    /// All rows of tensor `i`, `[len, dim]`.
-    pub fn tensor(&self, i: usize) -> &[f32] {
-        &self.data[i][..self.len * self.dims[i]]
+    /// Whether tensor `i` holds integers (read with [`ints`](Self::ints)).
+    pub fn is_integer(&self, i: usize) -> bool {
+        matches!(self.data[i], Rows::I32(_))
     }
 
-    /// Row `row` of tensor `i`.
+    /// All rows of float tensor `i`, `[len, dim]` (empty for an integer tensor).
+    pub fn tensor(&self, i: usize) -> &[f32] {
+        match &self.data[i] {
+            Rows::F32(v) => &v[..self.len * self.dims[i]],
+            Rows::I32(_) => &[],
+        }
+    }
+
+    /// All rows of integer tensor `i`, `[len, dim]`, exact (empty for a float tensor).
+    pub fn ints(&self, i: usize) -> &[i32] {
+        match &self.data[i] {
+            Rows::I32(v) => &v[..self.len * self.dims[i]],
+            Rows::F32(_) => &[],
+        }
+    }
+
+    /// Row `row` of float tensor `i` (empty for an integer tensor).
     pub fn tensor_row(&self, i: usize, row: usize) -> &[f32] {
         let d = self.dims[i];
-        &self.data[i][row * d..(row + 1) * d]
+        match &self.data[i] {
+            Rows::F32(v) => &v[row * d..(row + 1) * d],
+            Rows::I32(_) => &[],
+        }
+    }
+
+    /// Row `row` of integer tensor `i` (empty for a float tensor).
+    pub fn int_row(&self, i: usize, row: usize) -> &[i32] {
+        let d = self.dims[i];
+        match &self.data[i] {
+            Rows::I32(v) => &v[row * d..(row + 1) * d],
+            Rows::F32(_) => &[],
+        }
     }
 
     /// Legal-action mask of row `row`, mutable (`None` for continuous action spaces).
@@ -199,10 +340,23 @@ impl ObsBatch {
         (w > 0).then(|| &mut self.mask[row * w..(row + 1) * w])
     }
 
-    /// Row `row` of tensor `i`, mutable (for normalisation in place).
+    /// Row `row` of float tensor `i`, mutable (for normalisation in place; empty for an integer
+    /// tensor).
     pub fn row_mut(&mut self, i: usize, row: usize) -> &mut [f32] {
         let d = self.dims[i];
-        &mut self.data[i][row * d..(row + 1) * d]
+        match &mut self.data[i] {
+            Rows::F32(v) => &mut v[row * d..(row + 1) * d],
+            Rows::I32(_) => &mut [],
+        }
+    }
+
+    /// Row `row` of integer tensor `i`, mutable (empty for a float tensor).
+    pub fn int_row_mut(&mut self, i: usize, row: usize) -> &mut [i32] {
+        let d = self.dims[i];
+        match &mut self.data[i] {
+            Rows::I32(v) => &mut v[row * d..(row + 1) * d],
+            Rows::F32(_) => &mut [],
+        }
     }
 
     /// Flat size of tensor `i`.
@@ -221,16 +375,107 @@ impl ObsBatch {
         (w > 0).then(|| &self.mask[row * w..(row + 1) * w])
     }
 
-    /// Writes all tensors of every row, concatenated, into `out` (`[len, total_dim]`).
+    /// Writes all tensors of every row, concatenated and converted to `f32`, into `out`
+    /// (`[len, total_dim]`): the input of flat MLPs.
     pub fn concat_into(&self, out: &mut Vec<f32>) {
         let total: usize = self.dims.iter().sum();
         crate::nn::ensure(out, self.len * total);
         for r in 0..self.len {
             let mut at = r * total;
             for (i, d) in self.dims.iter().enumerate() {
-                out[at..at + d].copy_from_slice(&self.data[i][r * d..(r + 1) * d]);
+                let dst = &mut out[at..at + d];
+                match &self.data[i] {
+                    Rows::F32(v) => dst.copy_from_slice(&v[r * d..(r + 1) * d]),
+                    Rows::I32(v) => dst
+                        .iter_mut()
+                        .zip(&v[r * d..(r + 1) * d])
+                        .for_each(|(o, x)| *o = *x as f32),
+                }
                 at += d;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use a2perf_core::Tensor;
+
+    fn layout() -> ObsLayout {
+        ObsLayout {
+            tensors: vec![("ids".into(), vec![2]), ("x".into(), vec![1])],
+            dtypes: vec![DType::I32, DType::F32],
+            num_actions: None,
+        }
+    }
+
+    #[test]
+    fn integer_rows_are_exact_and_floats_convert_for_flat_networks() {
+        let big = (1 << 24) + 1;
+        let mut b = ObsBatch::new(&layout());
+        let obs = Observation {
+            tensors: vec![
+                Tensor::new("ids", &[2], vec![big, 3]),
+                Tensor::new("x", &[1], vec![0.5f32]),
+            ],
+            action_mask: None,
+        };
+        b.push(&obs).unwrap();
+        assert!(b.is_integer(0) && !b.is_integer(1));
+        assert_eq!(b.ints(0), &[big, 3]);
+        assert_eq!(b.tensor(1), &[0.5]);
+        assert!(b.tensor(0).is_empty() && b.ints(1).is_empty());
+        let mut x = Vec::new();
+        b.concat_into(&mut x);
+        assert_eq!(x, vec![big as f32, 3.0, 0.5]);
+        // uint8 tensors widen into the integer rows.
+        let small = Observation {
+            tensors: vec![
+                Tensor::new("ids", &[2], vec![7u8, 255]),
+                Tensor::new("x", &[1], vec![1.0f32]),
+            ],
+            action_mask: None,
+        };
+        b.write_row(0, &small).unwrap();
+        assert_eq!(b.ints(0), &[7, 255]);
+    }
+
+    #[test]
+    fn a_tensor_of_the_wrong_type_is_refused_by_name() {
+        let mut b = ObsBatch::new(&layout());
+        let floats = Observation {
+            tensors: vec![
+                Tensor::new("ids", &[2], vec![1.0f32, 2.0]),
+                Tensor::new("x", &[1], vec![0.5f32]),
+            ],
+            action_mask: None,
+        };
+        let err = b.push(&floats).unwrap_err().to_string();
+        assert!(
+            err.contains("`ids` is float32") && err.contains("int32"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn layouts_from_specs_carry_dtypes_and_refuse_int64() {
+        let spec = |dtype| EnvSpec {
+            id: "T-v0".into(),
+            observation_space: Space::Dict(vec![
+                ("a".into(), Space::uniform_box(&[1], 0.0, 1.0)),
+                ("b".into(), Space::uniform_box_of(&[2], dtype, 0.0, 9.0)),
+            ]),
+            action_space: Space::Discrete { n: 2 },
+            max_episode_steps: None,
+            metadata: Default::default(),
+        };
+        let l = ObsLayout::from_spec(&spec(DType::I32)).unwrap();
+        assert_eq!(l.dtypes, vec![DType::F32, DType::I32]);
+        assert!(l.same_shapes(&ObsLayout::floats(l.tensors.clone(), Some(2))));
+        let err = ObsLayout::from_spec(&spec(DType::I64))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("`b` is int64"), "{err}");
     }
 }

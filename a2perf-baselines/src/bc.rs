@@ -23,8 +23,9 @@ use crate::nn::{MlpWs, clip_grad_norm, ensure};
 use crate::policy::{Head, NetPolicy, ObsNorm};
 use crate::resume::{StateReader, StateWriter, resume_err};
 
-/// Version of BC's resumable training state.
-const STATE_VERSION: u32 = 1;
+/// Version of BC's resumable training state (2: observations are typed, so the
+/// observation hashes and the stored observations of version 1 no longer apply).
+const STATE_VERSION: u32 = 2;
 
 /// FNV-1a over the demonstrations as loaded (observations and actions), so that a run is not
 /// resumed on a dataset that changed.
@@ -39,6 +40,9 @@ fn fingerprint(store: &ObsBatch, act_d: &[usize], act_c: &[f32]) -> u64 {
     for t in 0..store.num_tensors() {
         for v in store.tensor(t) {
             eat(u64::from(v.to_bits()));
+        }
+        for v in store.ints(t) {
+            eat(u64::from(*v as u32));
         }
     }
     for row in 0..store.len() {

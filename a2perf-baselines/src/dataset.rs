@@ -6,6 +6,27 @@ use std::path::{Path, PathBuf};
 use a2perf_core::{ActMode, Action, Env, EnvSpec, Observation, Policy, RunError, rollout};
 use serde::{Deserialize, Serialize};
 
+/// Version of the JSON dataset file ([`Dataset::save_json`], `a2perf collect`'s
+/// `samples.json`). 2: observation tensors carry their element type (`int32` ids are integers).
+/// Files without a `format` field were written by older builds, with every id as a float; they
+/// are refused rather than read as the wrong type.
+pub const DATASET_FORMAT: u32 = 2;
+
+/// The first field of a dataset file, read before the samples.
+#[derive(Deserialize)]
+struct FormatProbe {
+    #[serde(default)]
+    format: Option<u32>,
+}
+
+/// A dataset file as written.
+#[derive(Serialize)]
+struct DatasetFileOut<'a> {
+    format: u32,
+    env_id: &'a Option<String>,
+    samples: &'a [Sample],
+}
+
 /// One demonstration step.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Sample {
@@ -65,21 +86,61 @@ impl Dataset {
         })
     }
 
-    /// Reads a dataset written by [`save_json`](Self::save_json).
+    /// Reads a dataset written by [`save_json`](Self::save_json) (or `a2perf collect`), refusing
+    /// files of another [`DATASET_FORMAT`].
+    ///
+    /// ```
+    /// use a2perf_baselines::dataset::{Dataset, Sample};
+    /// use a2perf_core::{Action, Observation};
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let path = dir.path().join("samples.json");
+    /// let mut d = Dataset::default();
+    /// d.samples.push(Sample { observation: Observation::flat(vec![0.5]), action: Action::Discrete(1) });
+    /// d.save_json(&path).unwrap();
+    /// assert_eq!(Dataset::load_json(&path).unwrap(), d);
+    /// ```
     pub fn load_json(path: &Path) -> Result<Self, DatasetError> {
         let bytes = std::fs::read(path).map_err(|e| DatasetError::Io {
             path: path.to_path_buf(),
             source: e,
         })?;
-        serde_json::from_slice(&bytes).map_err(|e| DatasetError::Malformed {
+        let malformed = |e: serde_json::Error| DatasetError::Malformed {
             path: path.to_path_buf(),
             reason: format!("line {}, column {}: {e}", e.line(), e.column()),
-        })
+        };
+        let probe: FormatProbe = serde_json::from_slice(&bytes).map_err(malformed)?;
+        match probe.format {
+            Some(DATASET_FORMAT) => {}
+            None => {
+                return Err(DatasetError::Malformed {
+                    path: path.to_path_buf(),
+                    reason: format!(
+                        "dataset of the old layout (no `format` field: every observation value, \
+                         token ids included, stored as float32); this build reads format \
+                         {DATASET_FORMAT}, with integer tensors as integers: collect it again"
+                    ),
+                });
+            }
+            Some(v) => {
+                return Err(DatasetError::Malformed {
+                    path: path.to_path_buf(),
+                    reason: format!(
+                        "dataset format {v} is not supported (this build reads {DATASET_FORMAT})"
+                    ),
+                });
+            }
+        }
+        serde_json::from_slice(&bytes).map_err(malformed)
     }
 
-    /// Writes the dataset as JSON (atomically).
+    /// Writes the dataset as JSON (atomically), in format [`DATASET_FORMAT`].
     pub fn save_json(&self, path: &Path) -> Result<(), DatasetError> {
-        a2perf_core::write_json_atomic(path, self).map_err(|e| DatasetError::Malformed {
+        let file = DatasetFileOut {
+            format: DATASET_FORMAT,
+            env_id: &self.env_id,
+            samples: &self.samples,
+        };
+        a2perf_core::write_json_atomic(path, &file).map_err(|e| DatasetError::Malformed {
             path: path.to_path_buf(),
             reason: e.to_string(),
         })
@@ -135,5 +196,52 @@ pub struct JsonDatasetFile(pub PathBuf);
 impl DatasetLoader for JsonDatasetFile {
     fn load(&self, _spec: &EnvSpec) -> Result<Dataset, DatasetError> {
         Dataset::load_json(&self.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn datasets_of_the_old_all_float_layout_are_refused_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("samples.json");
+        // What builds before typed observations wrote: no `format`, tensor data a float array.
+        let old = r#"{"env_id":"WebNavigation-Difficulty-01-v0","samples":[{"observation":
+            {"tensors":[{"name":"dom_tokens","shape":[2],"data":[3.0,4.0]}],"action_mask":null},
+            "action":{"Discrete":1}}]}"#;
+        std::fs::write(&path, old).unwrap();
+        let err = Dataset::load_json(&path).unwrap_err().to_string();
+        assert!(err.contains(&path.display().to_string()), "{err}");
+        assert!(err.contains("old layout"), "{err}");
+        std::fs::write(&path, r#"{"format":7,"env_id":null,"samples":[]}"#).unwrap();
+        let err = Dataset::load_json(&path).unwrap_err().to_string();
+        assert!(err.contains("format 7 is not supported"), "{err}");
+    }
+
+    #[test]
+    fn integer_tensors_round_trip_as_integers() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("samples.json");
+        let big = (1 << 24) + 1;
+        let observation = Observation {
+            tensors: vec![a2perf_core::Tensor::new("ids", &[2], vec![big, 7])],
+            action_mask: None,
+        };
+        let d = Dataset {
+            env_id: None,
+            samples: vec![Sample {
+                observation,
+                action: Action::Discrete(0),
+            }],
+        };
+        d.save_json(&path).unwrap();
+        let back = Dataset::load_json(&path).unwrap();
+        assert_eq!(back, d);
+        assert_eq!(
+            back.samples[0].observation.tensors[0].data.as_i32(),
+            Some(&[big, 7][..])
+        );
     }
 }

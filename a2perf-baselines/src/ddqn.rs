@@ -17,8 +17,9 @@ use crate::policy::{Head, NetPolicy};
 use crate::replay::{ReplayBuffer, ReplaySample};
 use crate::resume::{StateReader, StateWriter};
 
-/// Version of DDQN's resumable training state.
-const STATE_VERSION: u32 = 1;
+/// Version of DDQN's resumable training state (2: observations are typed, so the
+/// observation hashes and the stored observations of version 1 no longer apply).
+const STATE_VERSION: u32 = 2;
 
 /// DDQN hyperparameters (see [`Ddqn::params`]).
 #[derive(Clone, Debug, PartialEq)]

@@ -318,6 +318,31 @@ impl DiscreteNet {
     }
 }
 
+impl DiscreteArch {
+    /// Whether this network can read `layout`'s element types (a network saved before
+    /// observations were typed is checked against the environment it is loaded for): the web
+    /// network's token tensors must be integers and its other tensors floats, the circuit
+    /// network's `features` and `grid` floats.
+    pub fn check_dtypes(&self, layout: &ObsLayout) -> Result<(), String> {
+        let fits = match self {
+            DiscreteArch::Flat { .. } => true,
+            DiscreteArch::Circuit(c) => {
+                !layout.is_integer(c.features) && !layout.is_integer(c.grid)
+            }
+            DiscreteArch::Web(w) => web_dtypes_fit(layout, &w.idx),
+        };
+        if fits {
+            Ok(())
+        } else {
+            Err(
+                "the environment's tensor types (int32 ids, float32 features) differ from what \
+                 the network reads"
+                    .into(),
+            )
+        }
+    }
+}
+
 impl CircuitArch {
     /// Points the network at another netlist's observations. Its parameters depend only on the
     /// `features` width and the grid's channel count, and it scores any number of cells, so a
@@ -336,6 +361,9 @@ impl CircuitArch {
                 new.dim(features),
                 self.features_dim
             ));
+        }
+        if new.is_integer(features) || new.is_integer(grid) {
+            return Err("`features` and `grid` must be float32 tensors".into());
         }
         let shape = &new.tensors[grid].1;
         let cells: usize = shape.iter().skip(1).product();
@@ -401,7 +429,7 @@ fn circuit_arch(
     let features = layout.index("features")?;
     let grid = layout.index("grid")?;
     let shape = &layout.tensors[grid].1;
-    if shape.len() != 3 {
+    if shape.len() != 3 || layout.is_integer(features) || layout.is_integer(grid) {
         return None;
     }
     let padded_side = action_canvas(spec, shape[1], shape[2], n)?;
@@ -587,6 +615,9 @@ fn web_arch(
     for (i, name) in names.iter().enumerate() {
         idx[i] = layout.index(name)?;
     }
+    if !web_dtypes_fit(layout, &idx) {
+        return None;
+    }
     let shape = |i: usize| &layout.tensors[idx[i]].1;
     let (pk, dt, df) = (shape(0), shape(3), shape(4));
     if pk.len() != 2 || dt.len() != 3 || df.len() != 2 {
@@ -631,14 +662,22 @@ fn web_arch(
     }))
 }
 
+/// Whether the web network can read `layout`: token tensors (keys, values, DOM tokens) are
+/// integers, which the embedding looks up as they are, and masks and DOM features are floats.
+pub(crate) fn web_dtypes_fit(layout: &ObsLayout, idx: &[usize; 6]) -> bool {
+    idx.iter()
+        .enumerate()
+        .all(|(k, &i)| layout.is_integer(i) == matches!(k, 0 | 1 | 3))
+}
+
 fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws) {
     let b = batch.len();
     let (nf, ne, t, na) = (w.fields, w.elements, w.tokens, w.attrs);
     let (d, l) = (w.embed.dim, w.field_mlp.out());
-    let pk = batch.tensor(w.idx[0]);
-    let pv = batch.tensor(w.idx[1]);
+    let pk = batch.ints(w.idx[0]);
+    let pv = batch.ints(w.idx[1]);
     let pm = batch.tensor(w.idx[2]);
-    let dt = batch.tensor(w.idx[3]);
+    let dt = batch.ints(w.idx[3]);
     let df = batch.tensor(w.idx[4]);
     let dm = batch.tensor(w.idx[5]);
     ws.active_f.clear();
@@ -858,8 +897,8 @@ fn web_backward(
         &mut ws.a,
         Some(&mut fd[..caf * 2 * d]),
     );
-    let pk = batch.tensor(w.idx[0]);
-    let pv = batch.tensor(w.idx[1]);
+    let pk = batch.ints(w.idx[0]);
+    let pv = batch.ints(w.idx[1]);
     for (i, &(r, f)) in ws.active_f.iter().enumerate() {
         let at = (r * nf + f) * t;
         let g = &fd[i * 2 * d..(i + 1) * 2 * d];
@@ -886,7 +925,7 @@ fn web_backward(
         &mut ws.b,
         Some(&mut ed[..cae * ein_w]),
     );
-    let dt = batch.tensor(w.idx[3]);
+    let dt = batch.ints(w.idx[3]);
     for (i, &(r, e)) in ws.active_e.iter().enumerate() {
         let at = (r * ne + e) * na * t;
         w.embed.pool_backward(

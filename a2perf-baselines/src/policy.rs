@@ -67,17 +67,18 @@ pub struct ObsNorm {
 }
 
 impl ObsNorm {
-    /// Normalisation for the tensors that carry real-valued features: everything for the MLP
-    /// fallback, `features` for the circuit network, nothing for the web network (token ids and
-    /// masks must not be shifted).
+    /// Normalisation for the tensors that carry real-valued features: every float tensor for
+    /// the MLP fallback, `features` for the circuit network, nothing for the web network. Integer
+    /// tensors (token ids, indices, flags) are never shifted: they stay exact.
     pub fn for_head(head: &Head, layout: &ObsLayout) -> Option<Self> {
+        let floats = || (0..layout.tensors.len()).filter(|&i| !layout.is_integer(i));
         let tensors: Vec<usize> = match head {
             Head::Discrete(net) => match net.kind() {
                 "web" => Vec::new(),
                 "circuit" => layout.index("features").into_iter().collect(),
-                _ => (0..layout.tensors.len()).collect(),
+                _ => floats().collect(),
             },
-            _ => (0..layout.tensors.len()).collect(),
+            _ => floats().collect(),
         };
         if tensors.is_empty() {
             return None;
@@ -101,6 +102,34 @@ impl ObsNorm {
         for (&t, s) in self.tensors.iter().zip(self.stats.iter_mut()) {
             s.update(batch.tensor(t), rows);
         }
+    }
+}
+
+/// Whether a checkpoint's action space is `current`. Box bounds are compared as `f32`: the
+/// checkpoints written before spaces were typed stored `f32` bounds, which read back as the
+/// nearest `f64` of their decimal text, not the `f64` of the `f32`.
+fn same_action_space(saved: &Space, current: &Space) -> bool {
+    match (saved, current) {
+        (
+            Space::Box {
+                low: l1,
+                high: h1,
+                shape: s1,
+                dtype: d1,
+            },
+            Space::Box {
+                low: l2,
+                high: h2,
+                shape: s2,
+                dtype: d2,
+            },
+        ) => {
+            let same = |a: &[f64], b: &[f64]| {
+                a.len() == b.len() && a.iter().zip(b).all(|(x, y)| *x as f32 == *y as f32)
+            };
+            s1 == s2 && d1 == d2 && same(l1, l2) && same(h1, h2)
+        }
+        _ => saved == current,
     }
 }
 
@@ -342,7 +371,9 @@ impl NetPolicy {
         }
         let layout = ObsLayout::from_spec(spec)?;
         let mut head_spec = header.head;
-        if layout != header.layout || header.action_space != spec.action_space {
+        if !layout.same_shapes(&header.layout)
+            || !same_action_space(&header.action_space, &spec.action_space)
+        {
             // A circuit placement network does not depend on the netlist's size, so it may run on
             // other circuits; every other network needs exactly the observations it was trained on.
             match &mut head_spec {
@@ -359,7 +390,7 @@ impl NetPolicy {
                     })?;
                     *n = layout.num_actions.unwrap_or(0);
                 }
-                _ if layout != header.layout => {
+                _ if !layout.same_shapes(&header.layout) => {
                     return Err(bad(format!(
                         "checkpoint was trained on observations {:?} but environment `{}` produces {:?}",
                         header.layout.tensors, spec.id, layout.tensors
@@ -372,6 +403,14 @@ impl NetPolicy {
                     )));
                 }
             }
+        }
+        if let HeadSpec::Discrete { arch, .. } = &head_spec {
+            arch.check_dtypes(&layout).map_err(|why| {
+                bad(format!(
+                    "checkpoint's network cannot run on environment `{}`: {why}",
+                    spec.id
+                ))
+            })?;
         }
         let (head, expected) = match head_spec {
             HeadSpec::Discrete {
@@ -417,6 +456,15 @@ impl NetPolicy {
                 if t >= layout.tensors.len() || layout.dim(t) != d {
                     return Err(bad(format!(
                         "normalisation of tensor {t} has the wrong size"
+                    )));
+                }
+                if layout.is_integer(t) {
+                    return Err(bad(format!(
+                        "the checkpoint normalises tensor `{}`, which environment `{}` gives as \
+                         {} (integers are never normalised); retrain the policy",
+                        layout.tensors[t].0,
+                        spec.id,
+                        layout.dtype(t)
                     )));
                 }
                 let mut s = RunningNorm::new(d);
@@ -499,13 +547,13 @@ impl NetPolicy {
 
 /// Per-dimension bounds of a box space (unbounded for anything else).
 fn bounds(space: &Space) -> impl Iterator<Item = (f32, f32)> + '_ {
-    let (low, high): (&[f32], &[f32]) = match space {
+    let (low, high): (&[f64], &[f64]) = match space {
         Space::Box { low, high, .. } => (low, high),
         _ => (&[], &[]),
     };
     low.iter()
-        .copied()
-        .zip(high.iter().copied())
+        .zip(high)
+        .map(|(l, h)| (*l as f32, *h as f32))
         .chain(std::iter::repeat((f32::NEG_INFINITY, f32::INFINITY)))
 }
 

@@ -22,8 +22,9 @@ use crate::nn::{MlpWs, clip_grad_norm, ensure};
 use crate::policy::{Head, NetPolicy, ObsNorm};
 use crate::resume::{StateReader, StateWriter, resume_err};
 
-/// Version of PPO's resumable training state.
-const STATE_VERSION: u32 = 1;
+/// Version of PPO's resumable training state (2: observations are typed, so the
+/// observation hashes and the stored observations of version 1 no longer apply).
+const STATE_VERSION: u32 = 2;
 
 /// PPO hyperparameters (see [`Ppo::params`] for documentation and defaults).
 #[derive(Clone, Debug, PartialEq)]
@@ -585,7 +586,7 @@ pub(crate) fn clip_action(space: &a2perf_core::Space, a: &[f32], slot: &mut Acti
             v.extend(
                 a.iter()
                     .zip(low.iter().zip(high))
-                    .map(|(x, (l, h))| x.clamp(*l, *h)),
+                    .map(|(x, (l, h))| x.clamp(*l as f32, *h as f32)),
             );
         }
         _ => v.extend_from_slice(a),

@@ -180,8 +180,17 @@ impl<'a> StateReader<'a> {
         }
         let v = r.u32()?;
         if v != version {
+            // Format 1 predates typed observations: its observation hashes and stored
+            // observations were taken over float32 ids.
+            let why = if v == 1 {
+                " (it was written before integer observations were stored as integers; \
+                 start the run again)"
+            } else {
+                ""
+            };
             return Err(resume_err(format!(
-                "{algorithm} training state format {v} is not supported (this build reads {version})"
+                "{algorithm} training state format {v} is not supported (this build reads \
+                 {version}){why}"
             )));
         }
         Ok(r)

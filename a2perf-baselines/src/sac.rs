@@ -17,8 +17,9 @@ use crate::policy::{Head, NetPolicy, ObsNorm, squash_to_bounds};
 use crate::replay::{ReplayBuffer, ReplaySample};
 use crate::resume::{StateReader, StateWriter};
 
-/// Version of SAC's resumable training state.
-const STATE_VERSION: u32 = 1;
+/// Version of SAC's resumable training state (2: observations are typed, so the
+/// observation hashes and the stored observations of version 1 no longer apply).
+const STATE_VERSION: u32 = 2;
 
 /// SAC hyperparameters (see [`Sac::params`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -279,7 +280,10 @@ impl Algorithm for Sac {
         let (mut y, mut dq, mut dqin, mut dout, mut scratch) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let (low, high) = match &spec.action_space {
-            Space::Box { low, high, .. } => (low.clone(), high.clone()),
+            Space::Box { low, high, .. } => (
+                low.iter().map(|x| *x as f32).collect::<Vec<f32>>(),
+                high.iter().map(|x| *x as f32).collect::<Vec<f32>>(),
+            ),
             _ => (Vec::new(), Vec::new()),
         };
         let (mut qa, mut qb, mut out_buf) = (Vec::new(), Vec::new(), Vec::new());

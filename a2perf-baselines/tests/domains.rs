@@ -454,10 +454,11 @@ fn circuit_cost_landscape() {
         ) -> Result<Action, a2perf_core::PolicyError> {
             let g = o.tensor("grid").unwrap();
             let n = g.shape[1] * g.shape[2];
+            let d = g.data.as_f32().unwrap();
             let mask = o.action_mask.as_ref().unwrap();
             let best = (0..n)
                 .filter(|i| mask[*i])
-                .max_by(|a, b| g.data[3 * n + a].total_cmp(&g.data[3 * n + b]))
+                .max_by(|a, b| d[3 * n + a].total_cmp(&d[3 * n + b]))
                 .unwrap();
             Ok(Action::Discrete(best))
         }

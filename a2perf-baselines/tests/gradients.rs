@@ -133,7 +133,7 @@ proptest! {
         let e = Embedding::new(&mut alloc, 6, 3);
         let mut p = rand_vec(&mut rng, alloc.len(), 1.0);
         // Includes padding (0) and out-of-vocabulary ids (≥ 6).
-        let tokens: Vec<f32> = (0..groups * len).map(|_| rng.index(9) as f32).collect();
+        let tokens: Vec<i32> = (0..groups * len).map(|_| rng.index(9) as i32).collect();
         let c = rand_vec(&mut rng, groups * 3, 1.0);
         let mut out = vec![0.0; groups * 3];
         let mut g = vec![0.0; p.len()];

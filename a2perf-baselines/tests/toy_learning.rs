@@ -234,7 +234,13 @@ fn bandit_oracle_dataset(n: usize) -> Dataset {
     let mut samples = Vec::new();
     for i in 0..n {
         let obs = env.reset(Some(i as u64)).unwrap();
-        let ctx = obs.tensors[0].data.iter().position(|v| *v > 0.5).unwrap();
+        let ctx = obs.tensors[0]
+            .data
+            .as_f32()
+            .unwrap()
+            .iter()
+            .position(|v| *v > 0.5)
+            .unwrap();
         samples.push(Sample {
             observation: obs,
             action: Action::Discrete(MaskedBandit::best(ctx)),
@@ -277,7 +283,7 @@ fn bc_clones_discrete_and_continuous_experts() {
     let mut samples = Vec::new();
     for i in 0..200 {
         let obs = env.reset(Some(i)).unwrap();
-        let x = obs.tensors[0].data[0];
+        let x = obs.tensors[0].data.as_f32().unwrap()[0];
         samples.push(Sample {
             observation: obs,
             action: Action::Continuous(vec![(-4.0 * x).clamp(-1.0, 1.0)]),

@@ -33,16 +33,16 @@
 //! Tensors, in order (`M` = macros (hard then soft… in node-index order, as `get_macro_indices`),
 //! `G = cols·rows`, `E` = macro-adjacency edges):
 //!
-//! | name | shape | meaning |
-//! |---|---|---|
-//! | `features` | `[134]` | `[w/W, h/H, placed fraction, legal-cell fraction, area/(W·H), unplaced hard-macro area/(W·H)]` of the current macro, then an 8×8 density map (mean cell density per block), then an 8×8 congestion map (mean of (H+V)/2 per block) |
-//! | `grid` | `[4, rows, cols]` | channel 0 cell density, 1 congestion (H+V)/2, 2 legality of the current macro (0/1), 3 wirelength hint: `1 − Δ/maxΔ` where Δ is the HPWL increase of the current macro's nets if its centre were at that cell (pins at the centre; only placed/fixed pins count) |
-//! | `locations_x`, `locations_y` | `[M]` | macro centres / (W+H) (A2Perf normalisation): a placed hard macro's cell centre, otherwise its initial location |
-//! | `is_node_placed` | `[M]` | 1 for placed (or fixed) hard macros; soft macros 0 unless fixed, as A2Perf (`soft_macros_placed = true`: 1, at their current location) |
-//! | `current_node` | `[1]` | position in `M` of the macro to place (0 when done) |
-//! | `node_types` | `[M]` | 1 hard, 2 soft |
-//! | `macros_w`, `macros_h` | `[M]` | size / (W+H) (0 for soft macros, as A2Perf) |
-//! | `sparse_adj_i`, `sparse_adj_j`, `sparse_adj_weight` | `[E]` | macro adjacency (positions in `M`, `i < j`), weights ÷ (their mean + 10⁻⁶), as A2Perf |
+//! | name | shape | dtype | meaning |
+//! |---|---|---|---|
+//! | `features` | `[134]` | float32 | `[w/W, h/H, placed fraction, legal-cell fraction, area/(W·H), unplaced hard-macro area/(W·H)]` of the current macro, then an 8×8 density map (mean cell density per block), then an 8×8 congestion map (mean of (H+V)/2 per block) |
+//! | `grid` | `[4, rows, cols]` | float32 | channel 0 cell density, 1 congestion (H+V)/2, 2 legality of the current macro (0/1), 3 wirelength hint: `1 − Δ/maxΔ` where Δ is the HPWL increase of the current macro's nets if its centre were at that cell (pins at the centre; only placed/fixed pins count) |
+//! | `locations_x`, `locations_y` | `[M]` | float32 | macro centres / (W+H) (A2Perf normalisation): a placed hard macro's cell centre, otherwise its initial location |
+//! | `is_node_placed` | `[M]` | int32 | 1 for placed (or fixed) hard macros; soft macros 0 unless fixed, as A2Perf (`soft_macros_placed = true`: 1, at their current location) |
+//! | `current_node` | `[1]` | int32 | position in `M` of the macro to place (0 when done) |
+//! | `node_types` | `[M]` | int32 | 1 hard, 2 soft |
+//! | `macros_w`, `macros_h` | `[M]` | float32 | size / (W+H) (0 for soft macros, as A2Perf) |
+//! | `sparse_adj_i`, `sparse_adj_j`, `sparse_adj_weight` | `[E]` | int32, int32, float32 | macro adjacency (positions in `M`, `i < j`), weights ÷ (their mean + 10⁻⁶), as A2Perf |
 //!
 //! The mask is [`Observation::action_mask`] (`true` = legal). Unlike A2Perf, node tensors are not
 //! zero-padded to 3500, port clusters are not included, and `mask`, `fake_net_heatmap` and
@@ -61,8 +61,8 @@ use std::path::Path;
 use std::sync::Arc;
 
 use a2perf_core::{
-    Action, Env, EnvEntry, EnvError, EnvSpec, Frame, Observation, ParamKind, ParamSpec, Params,
-    Registry, Space, Step, TaskRef, Tensor, Value,
+    Action, DType, Env, EnvEntry, EnvError, EnvSpec, Frame, Observation, ParamKind, ParamSpec,
+    Params, Registry, Space, Step, TaskRef, Tensor, Value,
 };
 
 use crate::cost::{CostSettings, CostWeights, PlacementCost};
@@ -81,6 +81,12 @@ pub const A2PERF_INFEASIBLE_REWARD: f64 = -1.0;
 pub const PADDED_GRID: usize = 128;
 /// Side of the downsampled maps in `features`.
 pub const FEATURE_MAP: usize = 8;
+/// `node_types` value of a hard macro (A2Perf's encoding).
+pub const NODE_TYPE_HARD: i32 = 1;
+/// `node_types` value of a soft macro.
+pub const NODE_TYPE_SOFT: i32 = 2;
+/// `node_types` value of a port cluster in A2Perf (we have none; it bounds the box as there).
+pub const NODE_TYPE_PORT_CLUSTER: i32 = 3;
 /// Length of the `features` tensor.
 pub const FEATURE_DIM: usize = 6 + 2 * FEATURE_MAP * FEATURE_MAP;
 /// Channels of the `grid` tensor.
@@ -308,13 +314,20 @@ impl CircuitEnv {
         let norm = cw + ch;
         // Static graph features.
         let m = macros.len();
-        let node_types: Vec<f32> = macros
+        // Node positions are int32 tensors (as A2Perf's), so they must fit one.
+        if i32::try_from(m).is_err() {
+            return Err(EnvError::BadFile {
+                path: netlist.name.clone(),
+                reason: format!("{m} macros do not fit the int32 node indices of the observation"),
+            });
+        }
+        let node_types: Vec<i32> = macros
             .iter()
             .map(|&i| {
                 if cost.kind(i) == NodeKind::HardMacro {
-                    1.0
+                    NODE_TYPE_HARD
                 } else {
-                    2.0
+                    NODE_TYPE_SOFT
                 }
             })
             .collect();
@@ -351,37 +364,47 @@ impl CircuitEnv {
             adj.values().sum::<f64>() / adj.len() as f64
         } + ADJACENCY_EPSILON;
         let e = adj.len();
-        let static_tensors = vec![
-            Tensor {
-                name: "node_types".into(),
-                shape: vec![m],
-                data: node_types,
-            },
-            Tensor {
-                name: "macros_w".into(),
-                shape: vec![m],
-                data: mw,
-            },
-            Tensor {
-                name: "macros_h".into(),
-                shape: vec![m],
-                data: mh,
-            },
-            Tensor {
-                name: "sparse_adj_i".into(),
-                shape: vec![e],
-                data: adj.keys().map(|k| k.0 as f32).collect(),
-            },
-            Tensor {
-                name: "sparse_adj_j".into(),
-                shape: vec![e],
-                data: adj.keys().map(|k| k.1 as f32).collect(),
-            },
-            Tensor {
-                name: "sparse_adj_weight".into(),
-                shape: vec![e],
-                data: adj.values().map(|w| (w / mean) as f32).collect(),
-            },
+        let last_node = m.saturating_sub(1) as f64;
+        let index_box = |len: usize| Space::uniform_box_of(&[len], DType::I32, 0.0, last_node);
+        // (tensor, its box) of the features that do not change during an episode; the
+        // integer ones are int32 as in A2Perf's observation config.
+        let static_tensors: Vec<(Tensor, Space)> = vec![
+            (
+                Tensor::new("node_types", &[m], node_types),
+                Space::uniform_box_of(&[m], DType::I32, 0.0, f64::from(NODE_TYPE_PORT_CLUSTER)),
+            ),
+            (
+                Tensor::new("macros_w", &[m], mw),
+                Space::uniform_box(&[m], 0.0, f32::INFINITY),
+            ),
+            (
+                Tensor::new("macros_h", &[m], mh),
+                Space::uniform_box(&[m], 0.0, f32::INFINITY),
+            ),
+            (
+                Tensor::new(
+                    "sparse_adj_i",
+                    &[e],
+                    adj.keys().map(|k| k.0 as i32).collect::<Vec<_>>(),
+                ),
+                index_box(e),
+            ),
+            (
+                Tensor::new(
+                    "sparse_adj_j",
+                    &[e],
+                    adj.keys().map(|k| k.1 as i32).collect::<Vec<_>>(),
+                ),
+                index_box(e),
+            ),
+            (
+                Tensor::new(
+                    "sparse_adj_weight",
+                    &[e],
+                    adj.values().map(|w| (w / mean) as f32).collect::<Vec<_>>(),
+                ),
+                Space::uniform_box(&[e], 0.0, f32::INFINITY),
+            ),
         ];
         let n_actions = if config.padded_action {
             PADDED_GRID * PADDED_GRID
@@ -407,19 +430,14 @@ impl CircuitEnv {
             ),
             (
                 "is_node_placed".to_string(),
-                Space::uniform_box(&[m], 0.0, 1.0),
+                Space::uniform_box_of(&[m], DType::I32, 0.0, 1.0),
             ),
-            (
-                "current_node".to_string(),
-                Space::uniform_box(&[1], 0.0, m as f32),
-            ),
+            ("current_node".to_string(), index_box(1)),
         ];
-        for t in &static_tensors {
-            dict.push((
-                t.name.clone(),
-                Space::uniform_box(&t.shape, 0.0, f32::INFINITY),
-            ));
+        for (t, space) in &static_tensors {
+            dict.push((t.name.clone(), space.clone()));
         }
+        let static_tensors: Vec<Tensor> = static_tensors.into_iter().map(|(t, _)| t).collect();
         let mut metadata = BTreeMap::new();
         metadata.insert("netlist".into(), netlist.name.clone());
         metadata.insert("netlist_hash".into(), netlist.content_hash.clone());
@@ -598,48 +616,51 @@ impl CircuitEnv {
         let legal_count = self.mask.iter().filter(|m| **m).count();
         // Tensor slots.
         let m = self.macros.len();
-        let names_shapes: [(&str, usize); 6] = [
-            ("features", FEATURE_DIM),
-            ("grid", GRID_CHANNELS * g),
-            ("locations_x", m),
-            ("locations_y", m),
-            ("is_node_placed", m),
-            ("current_node", 1),
+        let names_shapes: [(&str, usize, DType); 6] = [
+            ("features", FEATURE_DIM, DType::F32),
+            ("grid", GRID_CHANNELS * g, DType::F32),
+            ("locations_x", m, DType::F32),
+            ("locations_y", m, DType::F32),
+            ("is_node_placed", m, DType::I32),
+            ("current_node", 1, DType::I32),
         ];
         let total = names_shapes.len() + self.static_tensors.len();
         obs.tensors.truncate(total);
-        for (k, (name, len)) in names_shapes.iter().enumerate() {
+        for (k, (name, len, dtype)) in names_shapes.iter().enumerate() {
             let shape: &[usize] = if *name == "grid" {
                 &[GRID_CHANNELS, rows, cols]
             } else {
                 &[*len]
             };
             if let Some(t) = obs.tensors.get_mut(k) {
-                if t.name != *name {
-                    t.name = name.to_string();
-                }
-                if t.shape != shape {
-                    t.shape = shape.to_vec();
-                }
-                t.data.clear();
-                t.data.resize(*len, 0.0);
+                t.reset_zeroed(name, shape, *dtype);
             } else {
-                obs.tensors.push(Tensor::zeros(name, shape));
+                obs.tensors.push(Tensor::zeros_of(name, shape, *dtype));
             }
         }
         for (k, st) in self.static_tensors.iter().enumerate() {
             let idx = names_shapes.len() + k;
             if let Some(t) = obs.tensors.get_mut(idx) {
-                // Copying is cheaper than comparing f32 data element by element.
-                if t.name != st.name || t.shape != st.shape || t.data.len() != st.data.len() {
-                    t.clone_from(st);
-                } else {
-                    t.data.copy_from_slice(&st.data);
-                }
+                // Copying is cheaper than comparing the data element by element.
+                t.copy_from(st);
             } else {
                 obs.tensors.push(st.clone());
             }
         }
+        let [features, grid, loc_x, loc_y, placed_t, current_t, ..] = &mut obs.tensors[..] else {
+            return;
+        };
+        // The slots were just given these types, so the typed views exist.
+        let (Some(feat), Some(grid_t), Some(loc_x), Some(loc_y), Some(placed_t), Some(current_t)) = (
+            features.data.as_f32_mut(),
+            grid.data.as_f32_mut(),
+            loc_x.data.as_f32_mut(),
+            loc_y.data.as_f32_mut(),
+            placed_t.data.as_i32_mut(),
+            current_t.data.as_i32_mut(),
+        ) else {
+            return;
+        };
         // Density and congestion per cell (congestion on the congestion grid mapped by centre).
         self.cost.density_cells(&mut self.dens);
         let (cw, ch) = {
@@ -647,7 +668,6 @@ impl CircuitEnv {
             (s.canvas_width, s.canvas_height)
         };
         let (hmap, vmap) = self.cost.congestion_maps();
-        let grid_t = &mut obs.tensors[1].data;
         for cell in 0..g {
             let ci = self.cell_ccell[cell] as usize;
             grid_t[cell] = self.dens[cell] as f32;
@@ -657,7 +677,6 @@ impl CircuitEnv {
         // Wirelength hint.
         if !done {
             self.wl_hint(self.order[self.current], cw, ch);
-            let grid_t = &mut obs.tensors[1].data;
             let mut max = 0.0f64;
             for r in 0..rows {
                 for c in 0..cols {
@@ -676,7 +695,6 @@ impl CircuitEnv {
             }
         }
         // Features.
-        let feat = &mut obs.tensors[0].data;
         let placed = self.current.min(self.order.len());
         if !done {
             let (w, h) = self.cost.size(self.order[self.current]);
@@ -696,7 +714,7 @@ impl CircuitEnv {
         feat[5] = (remaining / (cw * ch)) as f32;
         let fm = FEATURE_MAP;
         let counts = &self.block_counts;
-        let grid_ref = &obs.tensors[1].data;
+        let grid_ref = &*grid_t;
         let mut dmap = [0f32; FEATURE_MAP * FEATURE_MAP];
         let mut cmap = [0f32; FEATURE_MAP * FEATURE_MAP];
         for cell in 0..g {
@@ -704,7 +722,6 @@ impl CircuitEnv {
             dmap[b] += grid_ref[cell];
             cmap[b] += grid_ref[g + cell];
         }
-        let feat = &mut obs.tensors[0].data;
         for b in 0..fm * fm {
             let n = counts[b].max(1) as f32;
             feat[6 + b] = dmap[b] / n;
@@ -722,14 +739,15 @@ impl CircuitEnv {
                 NodeKind::SoftMacro => (self.cost.is_fixed(i), (self.base_x[i], self.base_y[i])),
                 _ => (self.cost.is_placed(i), self.cost.position(i)),
             };
-            obs.tensors[2].data[k] = (x / norm) as f32;
-            obs.tensors[3].data[k] = (y / norm) as f32;
-            obs.tensors[4].data[k] = if placed { 1.0 } else { 0.0 };
+            loc_x[k] = (x / norm) as f32;
+            loc_y[k] = (y / norm) as f32;
+            placed_t[k] = i32::from(placed);
         }
-        obs.tensors[5].data[0] = if done {
-            0.0
+        // Positions fit int32: checked when the environment was built.
+        current_t[0] = if done {
+            0
         } else {
-            self.macro_pos[self.order[self.current]] as f32
+            self.macro_pos[self.order[self.current]] as i32
         };
     }
 

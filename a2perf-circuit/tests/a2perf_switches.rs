@@ -23,10 +23,12 @@ use proptest::prelude::*;
 
 const SMALL: &str = "CircuitTraining-Synthetic-Small-v0";
 
-fn tensor<'a>(obs: &'a Observation, name: &str) -> &'a [f32] {
-    &obs.tensor(name)
+/// The values of tensor `name` as `f32` (the int32 ones are small indices and flags).
+fn tensor(obs: &Observation, name: &str) -> Vec<f32> {
+    obs.tensor(name)
         .unwrap_or_else(|| panic!("tensor {name}"))
         .data
+        .to_f32_vec()
 }
 
 fn first_legal(obs: &Observation) -> usize {

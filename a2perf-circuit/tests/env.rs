@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use a2perf_circuit::env::{
     A2PERF_INFEASIBLE_REWARD, FEATURE_DIM, GRID_CHANNELS, INFEASIBLE_REWARD,
 };
-use a2perf_core::{Action, Env, RngStream, Space, Value};
+use a2perf_core::{Action, DType, Env, RngStream, Space, Value};
 use common::{coarse_small, infeasible, registry, replay, shared_circuit_dir};
 
 fn random_episode(env: &mut dyn Env, seed: u64) -> (f64, usize, Vec<(String, f64)>) {
@@ -92,6 +92,19 @@ fn small_episode_layout_and_rewards() {
         };
         assert_eq!(shape, &t.shape, "{name}");
         assert_eq!(t.data.len(), shape.iter().product::<usize>());
+        // int32 exactly where A2Perf's observation config has it (node indices, types, flags).
+        let int32 = [
+            "is_node_placed",
+            "current_node",
+            "node_types",
+            "sparse_adj_i",
+            "sparse_adj_j",
+        ]
+        .contains(&name.as_str());
+        let want = if int32 { DType::I32 } else { DType::F32 };
+        assert_eq!(space.dtype(), Some(want), "{name}");
+        assert_eq!(t.dtype(), want, "{name}");
+        assert!(space.contains_tensor(t), "{name}");
     }
     assert_eq!(obs.tensors[0].name, "features");
     assert_eq!(obs.tensors[0].shape, vec![FEATURE_DIM]);
@@ -99,7 +112,7 @@ fn small_episode_layout_and_rewards() {
     assert_eq!(obs.tensors[1].shape, vec![GRID_CHANNELS, 16, 16]);
     // The mask channel equals the action mask.
     let mask = obs.action_mask.as_ref().unwrap();
-    let grid = &obs.tensors[1].data;
+    let grid = obs.tensors[1].data.as_f32().unwrap();
     for (c, &m) in mask.iter().enumerate() {
         assert_eq!(grid[2 * 256 + c] == 1.0, m);
     }
@@ -138,7 +151,7 @@ fn greedy_wirelength_hint_beats_random_wirelength() {
     let random_mean = random.iter().sum::<f64>() / random.len() as f64;
     let mut obs = env.reset(Some(0)).unwrap();
     let greedy = loop {
-        let g = &obs.tensors[1].data;
+        let g = obs.tensors[1].data.as_f32().unwrap();
         let cells = obs.action_mask.as_ref().unwrap().len();
         let a = (0..cells)
             .filter(|&c| obs.action_mask.as_ref().unwrap()[c])
@@ -202,7 +215,10 @@ fn toy_macro_with_shared_files() {
     // Golden mask example: MR (node 1) first, 108 legal cells (rows 2..7 x cols 1..18).
     let mask = obs.action_mask.clone().unwrap();
     assert_eq!(mask.iter().filter(|m| **m).count(), 108);
-    assert_eq!(obs.tensor("current_node").unwrap().data, vec![1.0]);
+    assert_eq!(
+        obs.tensor("current_node").unwrap().data.as_i32(),
+        Some(&[1][..])
+    );
     // Cell 41 -> padded action (41/20 + 59)*128 + 41%20 + 54 = 7863 (golden log).
     let step = env.step(&Action::Discrete(7863)).unwrap();
     assert!(!step.done());

@@ -5,7 +5,8 @@
 //! - [`Env`] / [`EnvSpec`] / [`Step`]: environments with Gymnasium semantics, stepped in place
 //!   without allocation; [`VecEnv`] steps many of them over the machine's cores; [`render`]:
 //!   the [`Frame`]s of [`Env::render`] and the small rasterizer that draws them.
-//! - [`Space`], [`Observation`], [`Action`]: discrete (with action masks), box and dict spaces.
+//! - [`Space`], [`Observation`], [`Action`]: discrete (with action masks), box and dict spaces;
+//!   [`Tensor`]s hold their values in the box's [`DType`] (`int32` ids, `float32` features).
 //! - [`Policy`], [`Algorithm`], [`TrainingContext`]: how algorithms train and report their curves
 //!   and checkpoints; [`rollout()`](crate::rollout::rollout) runs one episode.
 //! - [`Meter`]: anything that measures a phase, composable with [`MeterSet`].
@@ -45,6 +46,7 @@ pub mod resume;
 pub mod rng;
 pub mod rollout;
 pub mod space;
+pub mod tensor;
 pub mod value;
 pub mod vec_env;
 
@@ -65,6 +67,7 @@ pub use results::{RunDir, RunState, RunStatus, write_atomic, write_json_atomic};
 pub use resume::{NewestResume, ResumeDir, ResumePoint, ResumeWrite, TrainingProgress};
 pub use rng::{RngState, RngStream};
 pub use rollout::{ActMode, Episode, Transition, rollout};
-pub use space::{Action, Observation, Space, Tensor};
+pub use space::{Action, Observation, Space};
+pub use tensor::{DType, Tensor, TensorData};
 pub use value::{ParamError, ParamKind, ParamSpec, Params, Value, did_you_mean};
 pub use vec_env::{EpisodeSnapshot, VecEnv, VecEnvSnapshot, VecStep, observation_hash};

@@ -135,7 +135,9 @@ pub struct VecEnvSnapshot {
     pub envs: Vec<EpisodeSnapshot>,
 }
 
-/// FNV-1a over an observation's values (as bits), shapes and mask.
+/// FNV-1a over an observation's element types, shapes, values (exact bits in their own type) and
+/// mask. A tensor's type is part of the hash, so an `int32` observation never matches a hash
+/// taken when the same ids were `float32`.
 pub fn observation_hash(obs: &Observation) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     let mut eat = |x: u64| {
@@ -146,12 +148,11 @@ pub fn observation_hash(obs: &Observation) -> u64 {
     };
     for t in &obs.tensors {
         eat(t.data.len() as u64);
+        eat(t.dtype() as u64);
         for d in &t.shape {
             eat(*d as u64);
         }
-        for v in &t.data {
-            eat(u64::from(v.to_bits()));
-        }
+        t.data.for_each_bits(&mut eat);
     }
     if let Some(m) = &obs.action_mask {
         eat(m.len() as u64);

@@ -253,7 +253,7 @@ impl Env for Forgetful {
     fn step_into(&mut self, action: &Action, out: &mut Step) -> Result<(), EnvError> {
         self.inner.step_into(action, out)?;
         self.lifetime_steps += 1;
-        out.observation.tensors[0].data[1] = self.lifetime_steps as f32;
+        out.observation.tensors[0].data.as_f32_mut().unwrap()[1] = self.lifetime_steps as f32;
         Ok(())
     }
 }

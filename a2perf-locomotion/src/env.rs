@@ -21,7 +21,7 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 use a2perf_core::{
-    Action, Env, EnvError, EnvSpec, Frame, Observation, RngStream, Space, Step, Tensor,
+    Action, DType, Env, EnvError, EnvSpec, Frame, Observation, RngStream, Space, Step, Tensor,
 };
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -542,13 +542,17 @@ impl LocomotionEnv {
     fn write_obs(&self, out: &mut Observation) {
         if out.tensors.len() != 1
             || out.tensors[0].data.len() != OBS_DIM
+            || out.tensors[0].dtype() != DType::F32
             || out.tensors[0].name != "obs"
         {
             out.tensors.clear();
             out.tensors.push(Tensor::zeros("obs", &[OBS_DIM]));
         }
         out.action_mask = None;
-        let d = &mut out.tensors[0].data;
+        // A float32 tensor of OBS_DIM values (checked or rebuilt just above).
+        let Some(d) = out.tensors[0].data.as_f32_mut() else {
+            return;
+        };
         let mut k = 0;
         for h in &self.imu_hist {
             for v in h {
@@ -622,9 +626,10 @@ fn observation_space(motion: &ReferenceMotion) -> Space {
         high.extend(jmax.iter().map(|v| *v as f32));
     }
     Space::Box {
-        low,
-        high,
+        low: low.into_iter().map(f64::from).collect(),
+        high: high.into_iter().map(f64::from).collect(),
         shape: vec![OBS_DIM],
+        dtype: DType::F32,
     }
 }
 

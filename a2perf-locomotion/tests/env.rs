@@ -197,7 +197,7 @@ fn observation_layout_after_reset() {
     let obs = e.reset(Some(4)).unwrap();
     let t = obs.tensor("obs").unwrap();
     assert_eq!(t.shape, vec![OBS_DIM]);
-    let d = &t.data;
+    let d = t.data.as_f32().unwrap();
     // Reset quirk: histories show the default pose, zero IMU and zero last action.
     assert!(d[0..12].iter().all(|v| v.abs() < 1e-6));
     assert!(d[12..48].iter().all(|v| *v == 0.0));

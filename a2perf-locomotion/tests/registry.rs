@@ -24,7 +24,7 @@ fn every_registered_task_builds_and_records_its_clip() {
             panic!("box expected")
         };
         assert_eq!(low.len(), 12);
-        assert!((high[0] - 2.0 * std::f32::consts::PI).abs() < 1e-6);
+        assert!((high[0] - f64::from(2.0 * std::f32::consts::PI)).abs() < 1e-6);
         assert!(spec.metadata["clip"].starts_with("gen_"));
         assert_eq!(spec.metadata["clip_hash"].len(), 16);
         assert_eq!(spec.max_episode_steps, Some(600));

@@ -1,6 +1,7 @@
 //! A minimal writer of the Apache Arrow IPC *file* format (the `arrow` storage of Minari ≥ 0.5),
 //! for the handful of column types offline RL datasets need: `int32`, `int64`, `double`, `bool`,
-//! `fixed_size_list<float>` and `struct`. One file holds one record batch without nulls.
+//! `fixed_size_list` of `float`, `int32`, `int64` or `uint8` (observation tensors in their own
+//! element type) and `struct`. One file holds one record batch without nulls.
 //!
 //! The metadata is FlatBuffers; this module has its own tiny FlatBuffers encoder that lays out
 //! every table after the object that points at it (offsets only point forward, as the format
@@ -8,6 +9,8 @@
 
 use std::io;
 use std::path::Path;
+
+use a2perf_core::TensorData;
 
 /// A column of values (no nulls).
 #[derive(Clone, Debug, PartialEq)]
@@ -20,12 +23,13 @@ pub enum Column {
     F64(Vec<f64>),
     /// Booleans.
     Bool(Vec<bool>),
-    /// Fixed-size lists of 32-bit floats, `size` per row, row-major in `values`.
-    FixedF32 {
+    /// Fixed-size lists, `size` per row, row-major in `values`, of the values' element type
+    /// (`float`, `int32`, `int64` or `uint8`).
+    Fixed {
         /// Elements per row.
         size: usize,
         /// `rows × size` values.
-        values: Vec<f32>,
+        values: TensorData,
     },
     /// A struct of named child columns.
     Struct(Vec<(String, Column)>),
@@ -39,7 +43,7 @@ impl Column {
             Column::I64(v) => v.len(),
             Column::F64(v) => v.len(),
             Column::Bool(v) => v.len(),
-            Column::FixedF32 { size, values } => values.len() / (*size).max(1),
+            Column::Fixed { size, values } => values.len() / (*size).max(1),
             Column::Struct(children) => children.first().map_or(0, |(_, c)| c.rows()),
         }
     }
@@ -218,10 +222,10 @@ fn field(name: &str, col: &Column) -> Table {
         ),
         Column::F64(_) => (3, Table::default().with(0, Fb::I16(2)), vec![]),
         Column::Bool(_) => (6, Table::default(), vec![]),
-        Column::FixedF32 { size, .. } => (
+        Column::Fixed { size, values } => (
             16,
             Table::default().with(0, Fb::I32(*size as i32)),
-            vec![field("item", &Column::F64(vec![])).replace_type_f32()],
+            vec![item_field(values)],
         ),
         Column::Struct(ch) => (
             13,
@@ -234,16 +238,29 @@ fn field(name: &str, col: &Column) -> Table {
         .with(5, Fb::Tables(children))
 }
 
-impl Table {
-    /// Turns a `double` field into a `float` (single precision) one.
-    fn replace_type_f32(mut self) -> Table {
-        for (id, v) in &mut self.0 {
-            if *id == 3 {
-                *v = Fb::Table(Table::default().with(0, Fb::I16(1)));
-            }
-        }
-        self
-    }
+/// The child field `item` of a fixed-size list holding `values`: `FloatingPoint(SINGLE)` for
+/// `f32`, `Int(bits, signed)` for the integer types.
+fn item_field(values: &TensorData) -> Table {
+    let int = |bits: i32, signed: bool| {
+        (
+            2u8,
+            Table::default()
+                .with(0, Fb::I32(bits))
+                .with(1, Fb::Bool(signed)),
+        )
+    };
+    let (ty, ty_table) = match values {
+        TensorData::F32(_) => (3u8, Table::default().with(0, Fb::I16(1))),
+        TensorData::I32(_) => int(32, true),
+        TensorData::I64(_) => int(64, true),
+        TensorData::U8(_) => int(8, false),
+    };
+    Table::default()
+        .with(0, Fb::Str("item".into()))
+        .with(1, Fb::Bool(true))
+        .with(2, Fb::U8(ty))
+        .with(3, Fb::Table(ty_table))
+        .with(5, Fb::Tables(Vec::new()))
 }
 
 fn schema(cols: &[(String, Column)]) -> Table {
@@ -291,15 +308,16 @@ impl Body {
                 }
                 self.push_buffer(&bits);
             }
-            Column::FixedF32 { values, .. } => {
+            Column::Fixed { values, .. } => {
                 self.nodes.push((values.len() as i64, 0));
                 self.buffers.push((self.bytes.len() as i64, 0));
-                self.push_buffer(
-                    &values
-                        .iter()
-                        .flat_map(|x| x.to_le_bytes())
-                        .collect::<Vec<_>>(),
-                );
+                let bytes: Vec<u8> = match values {
+                    TensorData::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+                    TensorData::I32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+                    TensorData::I64(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+                    TensorData::U8(v) => v.clone(),
+                };
+                self.push_buffer(&bytes);
             }
             Column::Struct(ch) => {
                 for (_, c) in ch {
@@ -396,9 +414,16 @@ mod tests {
             ("b".to_string(), Column::Bool(vec![true, false, true])),
             (
                 "c".to_string(),
-                Column::FixedF32 {
+                Column::Fixed {
                     size: 2,
-                    values: vec![0.5; 6],
+                    values: TensorData::F32(vec![0.5; 6]),
+                },
+            ),
+            (
+                "d".to_string(),
+                Column::Fixed {
+                    size: 3,
+                    values: TensorData::I32(vec![7; 9]),
                 },
             ),
         ];

@@ -194,6 +194,8 @@ struct Sample<'a> {
 
 #[derive(Serialize)]
 struct SampleFile<'a> {
+    /// [`a2perf_baselines::dataset::DATASET_FORMAT`]: the `bc` baseline refuses other formats.
+    format: u32,
     env_id: &'a str,
     samples: Vec<Sample<'a>>,
 }
@@ -560,6 +562,7 @@ fn write_dataset(
         level_mu_sigma: mu_sigma,
     };
     let file = SampleFile {
+        format: a2perf_baselines::dataset::DATASET_FORMAT,
         env_id: &spec.id,
         samples: samples
             .iter()

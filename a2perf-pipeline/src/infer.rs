@@ -72,7 +72,8 @@ pub struct InferenceResults {
     pub system: PhaseSystem,
 }
 
-/// Draws an observation from `space` (uniform within finite bounds, standard normal otherwise).
+/// Draws an observation from `space` (each box in its element type, see
+/// [`Space::sample_tensor`]).
 /// Discrete action spaces get an all-legal mask of `action_n` entries.
 pub fn random_observation(
     space: &Space,
@@ -81,26 +82,10 @@ pub fn random_observation(
 ) -> Observation {
     fn fill(name: &str, space: &Space, rng: &mut RngStream, out: &mut Vec<Tensor>) {
         match space {
-            Space::Box { low, high, shape } => out.push(Tensor {
-                name: name.into(),
-                shape: shape.clone(),
-                data: low
-                    .iter()
-                    .zip(high)
-                    .map(|(&l, &h)| {
-                        if l.is_finite() && h.is_finite() {
-                            rng.range(f64::from(l), f64::from(h)) as f32
-                        } else {
-                            rng.normal() as f32
-                        }
-                    })
-                    .collect(),
-            }),
-            Space::Discrete { n } => out.push(Tensor {
-                name: name.into(),
-                shape: vec![1],
-                data: vec![rng.index((*n).max(1)) as f32],
-            }),
+            Space::Box { .. } => out.extend(space.sample_tensor(name, rng)),
+            Space::Discrete { n } => {
+                out.push(Tensor::new(name, &[1], vec![rng.index((*n).max(1)) as i32]))
+            }
             Space::Dict(items) => {
                 for (k, s) in items {
                     fill(k, s, rng, out);

@@ -14,16 +14,21 @@ use std::fmt::Write as _;
 use std::io;
 use std::path::Path;
 
-use a2perf_core::{Action, Observation, Space};
+use a2perf_core::{Action, DType, Observation, Space, TensorData};
 
 use super::arrow::{self, Column};
 
 /// Minari's dataset format version written in the metadata (supported by every Minari 0.5).
 pub const MINARI_VERSION: &str = "0.5.0";
 
-fn json_f32(x: f32) -> String {
-    if x.is_finite() {
-        format!("{x:?}")
+/// A bound as JSON text: `float32` bounds as the `f32` they are (`Infinity` for unbounded),
+/// integer bounds as integers.
+fn json_bound(x: f64, dtype: DType) -> String {
+    if dtype.is_integer() {
+        let (min, max) = dtype.range();
+        format!("{}", x.clamp(min, max) as i64)
+    } else if x.is_finite() {
+        format!("{:?}", x as f32)
     } else if x > 0.0 {
         "Infinity".into()
     } else {
@@ -31,23 +36,23 @@ fn json_f32(x: f32) -> String {
     }
 }
 
-fn nested(values: &[f32], shape: &[usize]) -> String {
+fn nested(values: &[f64], shape: &[usize], dtype: DType) -> String {
     match shape {
         [] => values
             .first()
-            .map_or_else(|| "0.0".into(), |v| json_f32(*v)),
+            .map_or_else(|| "0".into(), |v| json_bound(*v, dtype)),
         [_] => format!(
             "[{}]",
             values
                 .iter()
-                .map(|v| json_f32(*v))
+                .map(|v| json_bound(*v, dtype))
                 .collect::<Vec<_>>()
                 .join(", ")
         ),
         [n, rest @ ..] => {
             let step: usize = rest.iter().product();
             let parts: Vec<String> = (0..*n)
-                .map(|i| nested(&values[i * step..(i + 1) * step], rest))
+                .map(|i| nested(&values[i * step..(i + 1) * step], rest, dtype))
                 .collect();
             format!("[{}]", parts.join(", "))
         }
@@ -61,11 +66,17 @@ pub fn space_json(space: &Space) -> String {
         Space::Discrete { n } => {
             format!(r#"{{"type": "Discrete", "dtype": "int64", "start": 0, "n": {n}}}"#)
         }
-        Space::Box { low, high, shape } => format!(
-            r#"{{"type": "Box", "dtype": "float32", "shape": {:?}, "low": {}, "high": {}}}"#,
+        Space::Box {
+            low,
+            high,
             shape,
-            nested(low, shape),
-            nested(high, shape)
+            dtype,
+        } => format!(
+            r#"{{"type": "Box", "dtype": "{}", "shape": {:?}, "low": {}, "high": {}}}"#,
+            dtype.name(),
+            shape,
+            nested(low, shape, *dtype),
+            nested(high, shape, *dtype)
         ),
         Space::Dict(items) => {
             let mut s = String::from(r#"{"type": "Dict", "subspaces": {"#);
@@ -97,24 +108,33 @@ fn tensor_column(
     flat: bool,
 ) -> io::Result<Column> {
     match space {
-        Space::Box { low, .. } => {
+        Space::Box { low, dtype, .. } => {
             let size = low.len();
-            let mut values = Vec::with_capacity(size * obs.len());
+            let mut values = TensorData::zeros(*dtype, 0);
             for o in obs {
-                let before = values.len();
-                if flat {
-                    o.write_flat(&mut values);
-                } else if let Some(t) = o.tensor(name) {
-                    values.extend_from_slice(&t.data);
-                }
-                if values.len() - before != size {
+                let t = if flat {
+                    o.tensors.first()
+                } else {
+                    o.tensor(name)
+                };
+                let t = t.ok_or_else(|| bad(format!("observation `{name}` is missing")))?;
+                if t.data.len() != size || t.dtype() != *dtype {
                     return Err(bad(format!(
-                        "observation `{name}` has {} values, its space {size}",
-                        values.len() - before
+                        "observation `{name}` has {} {} values, its space {size} {dtype}",
+                        t.data.len(),
+                        t.dtype()
                     )));
                 }
+                match (&mut values, &t.data) {
+                    (TensorData::F32(v), TensorData::F32(x)) => v.extend_from_slice(x),
+                    (TensorData::I32(v), TensorData::I32(x)) => v.extend_from_slice(x),
+                    (TensorData::I64(v), TensorData::I64(x)) => v.extend_from_slice(x),
+                    (TensorData::U8(v), TensorData::U8(x)) => v.extend_from_slice(x),
+                    // Same element type, checked above.
+                    _ => {}
+                }
             }
-            Ok(Column::FixedF32 { size, values })
+            Ok(Column::Fixed { size, values })
         }
         Space::Discrete { .. } => obs
             .iter()
@@ -124,8 +144,8 @@ fn tensor_column(
                 } else {
                     o.tensor(name)
                 };
-                t.and_then(|t| t.data.first())
-                    .map(|v| *v as i64)
+                t.and_then(|t| t.data.get_f64(0))
+                    .map(|v| v as i64)
                     .ok_or_else(|| bad(format!("observation `{name}` is missing")))
             })
             .collect::<io::Result<Vec<_>>>()
@@ -163,7 +183,10 @@ fn action_column(space: &Space, actions: &[Action]) -> io::Result<Column> {
                 }
             }
             values.extend(std::iter::repeat_n(0.0, size));
-            Ok(Column::FixedF32 { size, values })
+            Ok(Column::Fixed {
+                size,
+                values: TensorData::F32(values),
+            })
         }
         Space::Dict(_) => Err(bad("dict action spaces are not supported".into())),
     }
@@ -268,14 +291,20 @@ mod tests {
     #[test]
     fn spaces_serialise_as_minari_does() {
         let b = Space::Box {
-            low: vec![f32::NEG_INFINITY, 0.0, 0.0, 0.0],
+            low: vec![f64::NEG_INFINITY, 0.0, 0.0, 0.0],
             high: vec![1.0; 4],
             shape: vec![2, 2],
+            dtype: DType::F32,
         };
         let s = space_json(&b);
         assert!(
             s.contains(r#""low": [[-Infinity, 0.0], [0.0, 0.0]]"#),
             "{s}"
+        );
+        let ids = Space::uniform_box_of(&[2], DType::I32, 0.0, 14_999.0);
+        assert_eq!(
+            space_json(&ids),
+            r#"{"type": "Box", "dtype": "int32", "shape": [2], "low": [0, 0], "high": [14999, 14999]}"#
         );
         let d = Space::Dict(vec![("a".into(), Space::Discrete { n: 3 })]);
         assert_eq!(

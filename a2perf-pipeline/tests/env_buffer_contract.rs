@@ -5,17 +5,21 @@
 //!
 //! Checked for every built-in environment that can be built from defaults: three instances with
 //! the same seed and actions, one reusing its buffers (the normal path), one whose buffers are
-//! poisoned (NaN, all-legal mask) before every call, one given fresh empty buffers (`Env::step`),
-//! must agree bit for bit.
+//! poisoned (NaN floats, `int32` tensors turned into NaN `float32` ones, all-legal mask) before
+//! every call, one given fresh empty buffers (`Env::step`), must agree bit for bit, element types
+//! included.
+//!
+//! Also checked for every such environment: each observation lies in the declared observation
+//! space (every tensor has its box's element type, shape and bounds).
 
 use std::collections::BTreeMap;
 
-use a2perf_core::{Action, Env, Observation, RngStream, Step, Value};
+use a2perf_core::{Action, DType, Env, Observation, RngStream, Space, Step, TensorData, Value};
 
 /// Bit patterns of everything a step reports.
 #[derive(Debug, PartialEq)]
 struct Fingerprint {
-    tensors: Vec<(String, Vec<usize>, Vec<u32>)>,
+    tensors: Vec<(String, Vec<usize>, DType, Vec<u64>)>,
     mask: Option<Vec<bool>>,
     reward: u64,
     terminated: bool,
@@ -30,11 +34,9 @@ fn fingerprint(step: &Step) -> Fingerprint {
             .tensors
             .iter()
             .map(|t| {
-                (
-                    t.name.clone(),
-                    t.shape.clone(),
-                    t.data.iter().map(|x| x.to_bits()).collect(),
-                )
+                let mut bits = Vec::with_capacity(t.data.len());
+                t.data.for_each_bits(|b| bits.push(b));
+                (t.name.clone(), t.shape.clone(), t.dtype(), bits)
             })
             .collect(),
         mask: step.observation.action_mask.clone(),
@@ -47,7 +49,9 @@ fn fingerprint(step: &Step) -> Fingerprint {
 
 fn poison(obs: &mut Observation) {
     for t in &mut obs.tensors {
-        t.data.fill(f32::NAN);
+        // Floats become NaN; integer tensors become NaN floats, so the environment must also
+        // restore the element type.
+        t.data = TensorData::F32(vec![f32::NAN; t.data.len()]);
     }
     if let Some(m) = &mut obs.action_mask {
         m.fill(true);
@@ -125,7 +129,7 @@ fn every_environment_overwrites_its_whole_observation() {
             };
             let want = fingerprint(&s_reused);
             assert!(
-                !want.tensors.is_empty() && want.tensors.iter().all(|(_, _, d)| !d.is_empty()),
+                !want.tensors.is_empty() && want.tensors.iter().all(|(.., d)| !d.is_empty()),
                 "{id}: empty observation"
             );
             assert_eq!(
@@ -143,5 +147,68 @@ fn every_environment_overwrites_its_whole_observation() {
                 s_reused.observation.action_mask
             );
         }
+    }
+}
+
+/// Why `obs` is not in `space`, naming the first tensor that is not in its box.
+fn outside(space: &Space, obs: &Observation) -> Option<String> {
+    let Space::Dict(items) = space else {
+        return (!space.contains_observation(obs)).then(|| format!("{:?}", obs.tensors));
+    };
+    if obs.tensors.len() != items.len() {
+        return Some(format!(
+            "{} tensors for {} boxes",
+            obs.tensors.len(),
+            items.len()
+        ));
+    }
+    items.iter().zip(&obs.tensors).find_map(|((name, b), t)| {
+        let Space::Box { shape, dtype, .. } = b else {
+            return Some(format!("`{name}` is not a box"));
+        };
+        (t.name != *name || !b.contains_tensor(t)).then(|| {
+            format!(
+                "tensor `{}` {} {:?} is not in box `{name}` {dtype} {shape:?} (or out of bounds)",
+                t.name,
+                t.dtype(),
+                t.shape
+            )
+        })
+    })
+}
+
+#[test]
+fn every_observation_is_in_the_observation_space() {
+    let reg = a2perf_pipeline::registry::full_registry();
+    let mut checked = Vec::new();
+    for entry in reg.envs() {
+        let Ok(mut env) = reg.make_env(&entry.id, &BTreeMap::new()) else {
+            continue;
+        };
+        let space = env.spec().observation_space.clone();
+        let actions = env.spec().action_space.clone();
+        let mut rng = RngStream::new(3, "dtype contract");
+        let mut obs = env.reset(Some(5)).unwrap();
+        for step in 0..6 {
+            if let Some(why) = outside(&space, &obs) {
+                panic!("{}, step {step}: {why}", entry.id);
+            }
+            let Some(action) = actions.sample(&mut rng, obs.action_mask.as_deref()) else {
+                break;
+            };
+            let s = env.step(&action).unwrap();
+            obs = if s.done() {
+                env.reset(None).unwrap()
+            } else {
+                s.observation
+            };
+        }
+        checked.push(entry.id.clone());
+    }
+    for domain in ["CircuitTraining", "QuadrupedLocomotion", "WebNavigation"] {
+        assert!(
+            checked.iter().any(|id| id.starts_with(domain)),
+            "no {domain} environment was checked: {checked:?}"
+        );
     }
 }

@@ -371,7 +371,11 @@ fn samples(path: &Path) {
         .collect();
     std::fs::write(
         path,
-        serde_json::to_vec(&serde_json::json!({ "samples": samples })).unwrap(),
+        serde_json::to_vec(&serde_json::json!({
+            "format": a2perf_baselines::dataset::DATASET_FORMAT,
+            "samples": samples,
+        }))
+        .unwrap(),
     )
     .unwrap();
 }

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use a2perf_core::{
-    Action, Env, EnvError, EnvSpec, Frame, Observation, RngStream, Space, Step, Tensor,
+    Action, DType, Env, EnvError, EnvSpec, Frame, Observation, RngStream, Space, Step, Tensor,
 };
 
 use crate::chromium::{ChromiumBackend, ChromiumOptions};
@@ -336,6 +336,11 @@ fn box_space(shape: &[usize], high: f32) -> Space {
     Space::uniform_box(shape, 0.0, high)
 }
 
+/// A box of token ids (int32 as in A2Perf, `0..=last_id`).
+fn token_space(shape: &[usize], last_id: f64) -> Space {
+    Space::uniform_box_of(shape, DType::I32, 0.0, last_id)
+}
+
 impl WebNavEnv {
     /// Builds the environment from a configuration (launching Chromium for that backend).
     pub fn new(cfg: WebNavConfig) -> Result<Self, WebError> {
@@ -361,12 +366,12 @@ impl WebNavEnv {
             });
         }
         let (f, e, t) = (cfg.num_fields, cfg.num_elements, cfg.num_tokens);
-        let v = (vocab_size() - 1) as f32;
+        let v = (vocab_size() - 1) as f64;
         let observation_space = Space::Dict(vec![
-            ("profile_keys".into(), box_space(&[f, t], v)),
-            ("profile_values".into(), box_space(&[f, t], v)),
+            ("profile_keys".into(), token_space(&[f, t], v)),
+            ("profile_values".into(), token_space(&[f, t], v)),
             ("profile_mask".into(), box_space(&[f], 1.0)),
-            ("dom_tokens".into(), box_space(&[e, DOM_ATTRIBUTES, t], v)),
+            ("dom_tokens".into(), token_space(&[e, DOM_ATTRIBUTES, t], v)),
             ("dom_features".into(), box_space(&[e, DOM_FEATURES], 1.0)),
             ("dom_mask".into(), box_space(&[e], 1.0)),
             ("time_step".into(), box_space(&[1], 1.0)),
@@ -621,32 +626,45 @@ impl WebNavEnv {
             &[e],
             &[1],
         ];
+        use DType::{F32, I32};
+        let dtypes = [I32, I32, F32, I32, F32, F32, F32];
         let fits = obs.tensors.len() == names.len()
             && obs
                 .tensors
                 .iter()
-                .zip(names.iter().zip(shapes.iter()))
-                .all(|(tn, (n, s))| tn.name == *n && tn.shape == *s);
+                .zip(names.iter().zip(shapes.iter()).zip(dtypes))
+                .all(|(tn, ((n, s), d))| tn.name == *n && tn.shape == *s && tn.dtype() == d);
         if !fits {
             obs.tensors = names
                 .iter()
                 .zip(shapes.iter())
-                .map(|(n, s)| Tensor::zeros(n, s))
+                .zip(dtypes)
+                .map(|((n, s), d)| Tensor::zeros_of(n, s, d))
                 .collect();
         }
         let [pk, pv, pm, dt, df, dm, ts] = &mut obs.tensors[..] else {
             return;
         };
-        fn put(dst: &mut [f32], src: &[u32]) {
+        // Every slot has its type (checked or rebuilt just above).
+        let (Some(pk), Some(pv), Some(pm), Some(dt), Some(df), Some(dm), Some(ts)) = (
+            pk.data.as_i32_mut(),
+            pv.data.as_i32_mut(),
+            pm.data.as_f32_mut(),
+            dt.data.as_i32_mut(),
+            df.data.as_f32_mut(),
+            dm.data.as_f32_mut(),
+            ts.data.as_f32_mut(),
+        ) else {
+            return;
+        };
+        fn put(dst: &mut [i32], src: &[u32]) {
             for (i, d) in dst.iter_mut().enumerate() {
-                *d = src.get(i).map_or(0.0, |&x| x as f32);
+                // Ids are below the vocabulary size (15 000), far inside int32.
+                *d = src.get(i).map_or(0, |&x| x as i32);
             }
         }
         for k in 0..f {
-            let (keys, vals) = (
-                &mut pk.data[k * t..(k + 1) * t],
-                &mut pv.data[k * t..(k + 1) * t],
-            );
+            let (keys, vals) = (&mut pk[k * t..(k + 1) * t], &mut pv[k * t..(k + 1) * t]);
             // `_dummy`'s value is None, which the original's tokenizer maps to no token.
             let field = match k.checked_sub(FIELD_OFFSET) {
                 None => Some((self.dummy_key.as_slice(), &[][..])),
@@ -659,10 +677,10 @@ impl WebNavEnv {
             let (ka, va) = field.unwrap_or((&[], &[]));
             put(keys, ka);
             put(vals, va);
-            pm.data[k] = f32::from(u8::from(field.is_some()));
+            pm[k] = f32::from(u8::from(field.is_some()));
         }
         // A2Perf: `float(num_steps) / float(step_limit)`.
-        ts.data[0] = self.steps as f32 / self.cfg.step_limit as f32;
+        ts[0] = self.steps as f32 / self.cfg.step_limit as f32;
         let (mut max_w, mut max_h) = (1.0f32, 1.0f32);
         for &n in &self.state.order {
             let r = self.state.rect[n as usize];
@@ -671,12 +689,12 @@ impl WebNavEnv {
         }
         let shown = self.shown();
         for slot in 0..e {
-            let toks = &mut dt.data[slot * DOM_ATTRIBUTES * t..(slot + 1) * DOM_ATTRIBUTES * t];
-            let feats = &mut df.data[slot * DOM_FEATURES..(slot + 1) * DOM_FEATURES];
+            let toks = &mut dt[slot * DOM_ATTRIBUTES * t..(slot + 1) * DOM_ATTRIBUTES * t];
+            let feats = &mut df[slot * DOM_FEATURES..(slot + 1) * DOM_FEATURES];
             if slot >= shown {
-                toks.iter_mut().for_each(|x| *x = 0.0);
+                toks.iter_mut().for_each(|x| *x = 0);
                 feats.iter_mut().for_each(|x| *x = 0.0);
-                dm.data[slot] = 0.0;
+                dm[slot] = 0.0;
                 continue;
             }
             let n = self.state.order[slot] as usize;
@@ -702,7 +720,7 @@ impl WebNavEnv {
             feats[5] = r[1] / max_h;
             feats[6] = r[2] / max_w;
             feats[7] = r[3] / max_h;
-            dm.data[slot] = 1.0;
+            dm[slot] = 1.0;
         }
         self.was_visible.clone_from(&self.state.visible);
         let n_actions = e * f * 2;

@@ -19,14 +19,15 @@
 //!
 //! ## Observation and action contract
 //!
-//! With F profile fields (default 25), E elements (250) and T tokens (10); token ids are small
-//! integers stored exactly as `f32`, 0 = padding, 1 = out of vocabulary ([`VOCAB_SIZE`] ids):
+//! With F profile fields (default 25), E elements (250) and T tokens (10); token ids are `int32`
+//! (as in A2Perf), 0 = padding, 1 = out of vocabulary ([`VOCAB_SIZE`] ids); every other tensor is
+//! `float32`:
 //!
 //! | tensor | shape | content |
 //! |---|---|---|
-//! | `profile_keys`, `profile_values` | [F, T] | field 0: A2Perf's `_dummy` (key `_dummy`, no value); fields 1..: the profile, sorted by key |
+//! | `profile_keys`, `profile_values` | [F, T] | int32 token ids; field 0: A2Perf's `_dummy` (key `_dummy`, no value); fields 1..: the profile, sorted by key |
 //! | `profile_mask` | \[F\] | 1 = field present (`_dummy` always) |
-//! | `dom_tokens` | [E, 5, T] | per visible element (document order): tag, value, text, placeholder, classes |
+//! | `dom_tokens` | [E, 5, T] | int32 token ids per visible element (document order): tag, value, text, placeholder, classes |
 //! | `dom_features` | [E, 8] | focused, tampered (acted on), new (not visible before), is_div, x, y, w, h |
 //! | `dom_mask` | \[E\] | 1 = element present |
 //! | `time_step` | \[1\] | steps taken / step limit (A2Perf's `time_step`) |

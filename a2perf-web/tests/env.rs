@@ -5,7 +5,9 @@ mod common;
 
 use std::collections::BTreeMap;
 
-use a2perf_core::{Action, Env, EnvError, Observation, Registry, RngStream, Space, Step, Value};
+use a2perf_core::{
+    Action, DType, Env, EnvError, Observation, Registry, RngStream, Space, Step, Value,
+};
 use a2perf_web::site::{Behaviour, Tag};
 use a2perf_web::{VOCAB_SIZE, WebNavConfig, WebNavEnv};
 use common::slot;
@@ -157,7 +159,13 @@ fn the_navbar_menu_opens_and_its_links_are_distractors() {
     assert_eq!(env.dom().order.len(), before + 6);
     assert!((s.reward + 0.05).abs() < 1e-12);
     // Newly shown elements are flagged "new".
-    let feats = &s.observation.tensor("dom_features").unwrap().data;
+    let feats = s
+        .observation
+        .tensor("dom_features")
+        .unwrap()
+        .data
+        .as_f32()
+        .unwrap();
     let new_count = (0..250).filter(|e| feats[e * 8 + 2] == 1.0).count();
     assert_eq!(new_count, 6);
     let link = env
@@ -219,9 +227,9 @@ fn masks_allow_clicks_with_field_zero_and_typing_into_controls_only() {
         assert_eq!(env.is_legal(a), expect);
     }
     assert!(n < 250);
-    let dm = &obs.tensor("dom_mask").unwrap().data;
+    let dm = obs.tensor("dom_mask").unwrap().data.as_f32().unwrap();
     assert_eq!(dm.iter().filter(|&&x| x == 1.0).count(), n);
-    let pm = &obs.tensor("profile_mask").unwrap().data;
+    let pm = obs.tensor("profile_mask").unwrap().data.as_f32().unwrap();
     assert_eq!(pm.iter().filter(|&&x| x == 1.0).count(), fields + 1);
     let masked = (0..mask.len()).find(|&a| !mask[a]).unwrap();
     assert!(matches!(
@@ -315,7 +323,7 @@ proptest! {
             prop_assert!(step.reward >= -2.6 && step.reward <= 2.0);
             let phi = step.info.get("potential").unwrap();
             prop_assert!((0.0..=1.0).contains(&phi));
-            let ts = step.observation.tensor("time_step").unwrap().data[0];
+            let ts = step.observation.tensor("time_step").unwrap().data.as_f32().unwrap()[0];
             prop_assert_eq!(ts, env.steps() as f32 / 25.0);
             for t in step.observation.tensors.iter().filter(|t| t.name != "time_step") {
                 let hi = if t.name.contains("tokens") || t.name.starts_with("profile_k") || t.name.starts_with("profile_v") {
@@ -323,7 +331,10 @@ proptest! {
                 } else {
                     1.0
                 };
-                prop_assert!(t.data.iter().all(|&x| (0.0..=hi).contains(&x) && x.fract() == 0.0 || (t.name == "dom_features" && (0.0..=1.0).contains(&x))));
+                let ids = ["profile_keys", "profile_values", "dom_tokens"].contains(&t.name.as_str());
+                prop_assert_eq!(t.dtype(), if ids { DType::I32 } else { DType::F32 });
+                let values = t.data.to_f32_vec();
+                prop_assert!(values.iter().all(|&x| (0.0..=hi).contains(&x) && x.fract() == 0.0 || (t.name == "dom_features" && (0.0..=1.0).contains(&x))));
             }
             obs.copy_from(&step.observation);
             if step.done() {

@@ -55,9 +55,9 @@ fn field_0_is_a2perf_dummy_and_time_step_counts_steps() {
     );
     let obs = env.reset(Some(0)).unwrap();
     let v = Vocabulary::standard();
-    let pk = &obs.tensor("profile_keys").unwrap().data;
-    let pv = &obs.tensor("profile_values").unwrap().data;
-    let pm = &obs.tensor("profile_mask").unwrap().data;
+    let pk = obs.tensor("profile_keys").unwrap().data.to_f32_vec();
+    let pv = obs.tensor("profile_values").unwrap().data.to_f32_vec();
+    let pm = obs.tensor("profile_mask").unwrap().data.to_f32_vec();
     // Field 0: `_dummy`, present, its value None has no token.
     assert_eq!(pk[0], v.id("_dummy") as f32);
     assert!(pk[1..10].iter().chain(&pv[0..10]).all(|&x| x == 0.0));
@@ -70,12 +70,12 @@ fn field_0_is_a2perf_dummy_and_time_step_counts_steps() {
     }
     assert!(pm[4..].iter().all(|&x| x == 0.0));
     // time_step = steps / step_limit: 0 at reset, k/25 after k steps, 1 at the limit.
-    assert_eq!(obs.tensor("time_step").unwrap().data, [0.0]);
+    assert_eq!(obs.tensor("time_step").unwrap().data.to_f32_vec(), [0.0]);
     let h = slot(&env, |n| n.tag == Tag::H5);
     for k in 1..=25 {
         let s = act(&mut env, (h, 0, 0));
         assert_eq!(
-            s.observation.tensor("time_step").unwrap().data,
+            s.observation.tensor("time_step").unwrap().data.to_f32_vec(),
             [k as f32 / 25.0]
         );
     }
@@ -85,7 +85,7 @@ fn field_0_is_a2perf_dummy_and_time_step_counts_steps() {
 fn placeholders_are_filled_by_default_and_empty_with_the_switch() {
     let pages: &[&[&str]] = &[&["username", "password", "addressline2", "submit"]];
     let placeholder_slots = |obs: &Observation| -> Vec<f32> {
-        let dt = &obs.tensor("dom_tokens").unwrap().data;
+        let dt = obs.tensor("dom_tokens").unwrap().data.to_f32_vec();
         (0..250)
             .flat_map(|e| dt[(e * 5 + 3) * 10..(e * 5 + 4) * 10].to_vec())
             .collect()
@@ -108,7 +108,7 @@ fn placeholders_are_filled_by_default_and_empty_with_the_switch() {
     let obs2 = bare.reset(Some(0)).unwrap();
     assert!(placeholder_slots(&obs2).iter().all(|&x| x == 0.0));
     let other = |o: &Observation| {
-        let dt = &o.tensor("dom_tokens").unwrap().data;
+        let dt = o.tensor("dom_tokens").unwrap().data.to_f32_vec();
         (0..250 * 5)
             .filter(|k| k % 5 != 3)
             .flat_map(|k| dt[k * 10..(k + 1) * 10].to_vec())
@@ -330,7 +330,12 @@ fn a2perf_actions_follow_visit_group() {
     let fu = field_of(&env, "username");
     let s = act(&mut env, (u, fu, 1));
     assert!(close(s.reward, 0.25 - 0.05), "{}", s.reward);
-    let feats = &s.observation.tensor("dom_features").unwrap().data;
+    let feats = s
+        .observation
+        .tensor("dom_features")
+        .unwrap()
+        .data
+        .to_f32_vec();
     assert!((0..250).all(|e| feats[e * 8] == 0.0));
     // Acting without a value (kind 0, or kind 1 with `_dummy`) clears the input: −1/4 − 0.05,
     // then nothing changes: −0.55.
@@ -409,13 +414,25 @@ fn a2perf_actions_repeat_the_stale_reward_on_a_missing_element() {
     assert!(close(s4.reward, 0.40), "{}", s4.reward);
     assert!(!s4.terminated && !s4.truncated);
     assert_eq!(
-        s4.observation.tensor("time_step").unwrap().data,
+        s4.observation
+            .tensor("time_step")
+            .unwrap()
+            .data
+            .to_f32_vec(),
         [4.0 / 25.0]
     );
     // The page is unchanged.
     assert_eq!(
-        s4.observation.tensor("dom_tokens").unwrap().data,
-        s3.observation.tensor("dom_tokens").unwrap().data
+        s4.observation
+            .tensor("dom_tokens")
+            .unwrap()
+            .data
+            .to_f32_vec(),
+        s3.observation
+            .tensor("dom_tokens")
+            .unwrap()
+            .data
+            .to_f32_vec()
     );
     // Outside the action space is an error in both semantics.
     assert!(matches!(

@@ -133,7 +133,8 @@ pub fn param_to_py<'py>(py: Python<'py>, p: &ParamSpec) -> PyResult<Bound<'py, P
 }
 
 /// A space as nested tuples that `a2perf_rs.spaces` turns into `gymnasium.spaces`:
-/// `("discrete", n)`, `("box", low, high)` (float32 arrays of the space's shape) or
+/// `("discrete", n)`, `("box", low, high, dtype)` (bounds as float64 arrays of the space's
+/// shape, exact for every element type; `dtype` the numpy name, e.g. `"int32"`) or
 /// `("dict", [(name, space), …])`.
 pub fn space_to_py<'py>(py: Python<'py>, s: &Space) -> PyResult<Bound<'py, PyTuple>> {
     match s {
@@ -144,7 +145,12 @@ pub fn space_to_py<'py>(py: Python<'py>, s: &Space) -> PyResult<Bound<'py, PyTup
                 n.into_pyobject(py)?.into_any(),
             ],
         ),
-        Space::Box { low, high, shape } => {
+        Space::Box {
+            low,
+            high,
+            shape,
+            dtype,
+        } => {
             let lo = PyArray1::from_slice(py, low).reshape(shape.clone())?;
             let hi = PyArray1::from_slice(py, high).reshape(shape.clone())?;
             PyTuple::new(
@@ -153,6 +159,7 @@ pub fn space_to_py<'py>(py: Python<'py>, s: &Space) -> PyResult<Bound<'py, PyTup
                     PyString::new(py, "box").into_any(),
                     lo.into_any(),
                     hi.into_any(),
+                    PyString::new(py, dtype.name()).into_any(),
                 ],
             )
         }
@@ -193,9 +200,12 @@ impl ActionSpec {
     pub fn of(space: &Space) -> PyResult<Self> {
         match space {
             Space::Discrete { n } => Ok(Self::Discrete(*n)),
-            Space::Box { low, high, shape } => Ok(Self::Box {
-                low: low.clone(),
-                high: high.clone(),
+            // Actions are float32 (Action::Continuous); the bounds as the float32 they are.
+            Space::Box {
+                low, high, shape, ..
+            } => Ok(Self::Box {
+                low: low.iter().map(|x| *x as f32).collect(),
+                high: high.iter().map(|x| *x as f32).collect(),
                 shape: shape.clone(),
             }),
             Space::Dict(_) => Err(PyTypeError::new_err(

@@ -25,8 +25,8 @@ use pyo3::types::{PyDict, PyTuple};
 
 use crate::convert::{ActionSpec, type_name_of};
 use crate::env::{
-    EpisodeCore, IllegalAction, ObsLayout, build_env, env_kwargs, frame_to_py, guard_close,
-    render_env, spec_to_py,
+    EpisodeCore, IllegalAction, ObsArray, ObsLayout, ObsRow, ObsRows, build_env, env_kwargs,
+    frame_to_py, guard_close, render_env, spec_to_py,
 };
 use crate::errors::guard;
 
@@ -53,7 +53,7 @@ struct Slot {
 
 /// Where one environment writes its outcome.
 struct SlotOut<'a> {
-    obs: Vec<&'a mut [f32]>,
+    obs: Vec<ObsRow<'a>>,
     reward: &'a mut f64,
     terminated: &'a mut bool,
     truncated: &'a mut bool,
@@ -62,7 +62,7 @@ struct SlotOut<'a> {
 
 /// The arrays one call writes its outcome into and returns.
 struct Arrays<'py> {
-    obs: Vec<Bound<'py, PyArrayDyn<f32>>>,
+    obs: Vec<ObsArray<'py>>,
     rewards: Bound<'py, PyArray1<f64>>,
     terminated: Bound<'py, PyArray1<bool>>,
     truncated: Bound<'py, PyArray1<bool>>,
@@ -87,7 +87,7 @@ impl<'py> Arrays<'py> {
 
     fn unbind(self) -> Buffers {
         Buffers {
-            obs: self.obs.into_iter().map(Bound::unbind).collect(),
+            obs: self.obs.into_iter().map(ObsArray::unbind).collect(),
             rewards: self.rewards.unbind(),
             terminated: self.terminated.unbind(),
             truncated: self.truncated.unbind(),
@@ -98,7 +98,8 @@ impl<'py> Arrays<'py> {
 
 /// `copy=False`: the vector env's own [`Arrays`], overwritten by every call.
 struct Buffers {
-    obs: Vec<Py<PyArrayDyn<f32>>>,
+    /// Arrays of the layout's element types (see [`ObsArray::bind`]).
+    obs: Vec<Py<PyAny>>,
     rewards: Py<PyArray1<f64>>,
     terminated: Py<PyArray1<bool>>,
     truncated: Py<PyArray1<bool>>,
@@ -106,14 +107,19 @@ struct Buffers {
 }
 
 impl Buffers {
-    fn bind<'py>(&self, py: Python<'py>) -> Arrays<'py> {
-        Arrays {
-            obs: self.obs.iter().map(|b| b.bind(py).clone()).collect(),
+    fn bind<'py>(&self, py: Python<'py>, layout: &ObsLayout) -> PyResult<Arrays<'py>> {
+        Ok(Arrays {
+            obs: self
+                .obs
+                .iter()
+                .zip(&layout.dtypes)
+                .map(|(b, t)| ObsArray::bind(py, b, *t))
+                .collect::<PyResult<_>>()?,
             rewards: self.rewards.bind(py).clone(),
             terminated: self.terminated.bind(py).clone(),
             truncated: self.truncated.bind(py).clone(),
             masks: self.masks.as_ref().map(|m| m.bind(py).clone()),
-        }
+        })
     }
 }
 
@@ -141,7 +147,7 @@ pub struct PyVecEnv {
 fn write_obs(layout: &ObsLayout, obs: &Observation, out: &mut SlotOut<'_>) -> PyResult<()> {
     layout.check(obs)?;
     for (dst, t) in out.obs.iter_mut().zip(&obs.tensors) {
-        dst.copy_from_slice(&t.data);
+        dst.copy_from(&t.data)?;
     }
     Ok(())
 }
@@ -357,7 +363,7 @@ impl PyVecEnv {
             truncated,
             masks,
         } = match &st.bufs {
-            Some(bufs) => bufs.bind(py),
+            Some(bufs) => bufs.bind(py, &self.layout)?,
             None => Arrays::new(py, &self.layout, n, &self.action),
         };
         {
@@ -367,10 +373,10 @@ impl PyVecEnv {
             let mut trunc_rw = truncated.readwrite();
             let mut mask_rw = masks.as_ref().map(|m| m.readwrite());
             let slices = |e: numpy::AsSliceError| PyRuntimeError::new_err(e.to_string());
-            let mut obs_rows: Vec<std::slice::ChunksMut<'_, f32>> = obs_rw
+            let mut obs_rows: Vec<ObsRows<'_>> = obs_rw
                 .iter_mut()
                 .zip(&self.layout.dims)
-                .map(|(rw, d)| Ok(rw.as_slice_mut().map_err(slices)?.chunks_mut((*d).max(1))))
+                .map(|(rw, d)| rw.rows(*d))
                 .collect::<PyResult<_>>()?;
             let mut mask_rows = match mask_rw.as_mut() {
                 Some(rw) => {
@@ -415,7 +421,7 @@ impl PyVecEnv {
         }
         let obs = self
             .layout
-            .wrap(py, obs_bufs.into_iter().map(Bound::into_any).collect())?;
+            .wrap(py, obs_bufs.into_iter().map(ObsArray::into_any).collect())?;
         let infos = self.infos(py, st, masks.map(Bound::into_any))?;
         PyTuple::new(
             py,

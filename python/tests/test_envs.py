@@ -74,7 +74,8 @@ def test_locomotion_with_the_motion_file() -> None:
 def test_spaces_are_the_rust_spaces_exactly() -> None:
     env = A2PerfEnv("QuadrupedLocomotion-DogPace-v0")
     native = env._native.spec()
-    _, low, high = native["observation_space"]
+    _, low, high, dtype = native["observation_space"]
+    assert dtype == "float32"
     obs_space = env.observation_space
     assert isinstance(obs_space, gym.spaces.Box)
     assert obs_space.dtype == np.float32 and obs_space.shape == (160,)
@@ -91,7 +92,8 @@ def test_spaces_are_the_rust_spaces_exactly() -> None:
     assert web.observation_space["dom_tokens"].shape[0] == 20
     assert web.action_space == gym.spaces.Discrete(20 * 5 * 2)
     obs, info = web.reset(seed=0)
-    assert all(obs[k].dtype == np.float32 for k in obs)
+    assert all(obs[k].dtype == web.observation_space[k].dtype for k in obs)
+    assert obs["dom_tokens"].dtype == np.int32
     assert obs in web.observation_space
     mask = info["action_mask"]
     assert mask.dtype == np.int8 and mask.shape == (200,) and mask.sum() > 0
@@ -102,6 +104,61 @@ def test_spaces_are_the_rust_spaces_exactly() -> None:
     circ = A2PerfEnv("CircuitTraining-Synthetic-Small-v0")
     assert np.isinf(circ.observation_space["grid"].high).all()
     assert circ.max_episode_steps == 12
+
+
+# The tensors the original environments declare int32 (A2Perf's web observation wrapper and
+# circuit_training's observation config); every other tensor is float32.
+INT32_TENSORS = {
+    "profile_keys", "profile_values", "dom_tokens",
+    "is_node_placed", "current_node", "node_types", "sparse_adj_i", "sparse_adj_j",
+}
+
+
+def _dtypes_by_name(space: gym.spaces.Space) -> dict[str, np.dtype]:
+    if isinstance(space, gym.spaces.Dict):
+        return {k: sub.dtype for k, sub in space.spaces.items()}
+    return {"obs": space.dtype}
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_int32_exactly_where_the_original_has_it(env_id: str) -> None:
+    env = gym.make(env_id, **file_kwargs(env_id))
+    try:
+        want = {
+            name: np.dtype(np.int32 if name in INT32_TENSORS else np.float32)
+            for name in _dtypes_by_name(env.observation_space)
+        }
+        assert _dtypes_by_name(env.observation_space) == want
+        obs, info = env.reset(seed=0)
+        # Several steps: the single environment hands out recycled buffers after the first.
+        for _ in range(4):
+            arrays = obs if isinstance(obs, dict) else {"obs": obs}
+            assert {k: a.dtype for k, a in arrays.items()} == want
+            assert obs in env.observation_space
+            mask = info.get("action_mask")
+            action = env.action_space.sample(mask=mask) if mask is not None else (
+                env.action_space.sample())
+            obs, _, term, trunc, info = env.step(action)
+            if term or trunc:
+                obs, info = env.reset()
+        if "WebNavigation" in env_id:
+            assert {"profile_keys", "profile_values", "dom_tokens"} <= {
+                k for k, d in want.items() if d == np.int32}
+        if "CircuitTraining" in env_id:
+            assert {"current_node", "is_node_placed", "node_types"} <= {
+                k for k, d in want.items() if d == np.int32}
+    finally:
+        env.close()
+
+
+def test_int32_ids_stay_exact_and_embed_directly() -> None:
+    env = A2PerfEnv("WebNavigation-Difficulty-01-v0")
+    obs, _ = env.reset(seed=3)
+    tokens = obs["dom_tokens"]
+    assert tokens.dtype == np.int32 and tokens.max() < env.observation_space["dom_tokens"].high.max()
+    # An embedding lookup takes the ids as they come (no float-to-index cast).
+    table = np.arange(int(env.observation_space["dom_tokens"].high.max()) + 1)
+    assert (table[tokens] == tokens).all()
 
 
 def test_params_are_typed_and_resolved() -> None:

@@ -151,7 +151,7 @@ def test_infer_and_generalize_write_what_the_cli_writes(tmp_path: Path) -> None:
         calls.append(obs)
         assert set(obs) == {"profile_keys", "profile_values", "profile_mask", "dom_tokens",
                             "dom_features", "dom_mask", "time_step"}
-        assert obs["dom_tokens"].dtype == np.float32 and obs["dom_tokens"].shape == (250, 5, 10)
+        assert obs["dom_tokens"].dtype == np.int32 and obs["dom_tokens"].shape == (250, 5, 10)
         assert info["action_mask"].dtype == np.int8 and info["action_mask"].shape == (12500,)
         return first_legal(obs, info)
 

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::ParamAlloc;
 
-/// An embedding table `[vocab, dim]`. Token id 0 is padding and never contributes; ids at or above
+/// An embedding table `[vocab, dim]`, looked up with `int32` token ids. Token id 0 is padding and never contributes; ids at or above
 /// `vocab` share the last row (an out-of-vocabulary bucket), so unseen ids cannot index out of
 /// bounds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -34,12 +34,9 @@ impl Embedding {
         }
     }
 
-    fn row(&self, token: f32) -> Option<usize> {
-        // NaN and padding (0) both fall through to `None`.
-        if token.is_nan() || token < 0.5 {
-            return None;
-        }
-        let id = token.round() as usize;
+    fn row(&self, token: i32) -> Option<usize> {
+        // Padding (0) and negative ids do not contribute.
+        let id = usize::try_from(token).ok().filter(|&id| id > 0)?;
         Some(id.min(self.vocab - 1))
     }
 
@@ -52,10 +49,10 @@ impl Embedding {
     /// let e = Embedding::new(&mut alloc, 3, 2);
     /// let params = vec![0.0, 0.0, 1.0, 2.0, 3.0, 4.0];
     /// let mut out = vec![0.0; 4];
-    /// e.pool(&params, &[1.0, 2.0, 0.0, 0.0], 2, &mut out);
+    /// e.pool(&params, &[1, 2, 0, 0], 2, &mut out);
     /// assert_eq!(out, vec![2.0, 3.0, 0.0, 0.0]);
     /// ```
-    pub fn pool(&self, params: &[f32], tokens: &[f32], len: usize, out: &mut [f32]) {
+    pub fn pool(&self, params: &[f32], tokens: &[i32], len: usize, out: &mut [f32]) {
         let table = &params[self.offset..self.offset + self.vocab * self.dim];
         for (group, o) in tokens.chunks_exact(len).zip(out.chunks_exact_mut(self.dim)) {
             o.fill(0.0);
@@ -76,7 +73,7 @@ impl Embedding {
     }
 
     /// Accumulates the table gradient of [`pool`](Self::pool) given `dout[group, dim]`.
-    pub fn pool_backward(&self, grads: &mut [f32], tokens: &[f32], len: usize, dout: &[f32]) {
+    pub fn pool_backward(&self, grads: &mut [f32], tokens: &[i32], len: usize, dout: &[f32]) {
         let table = &mut grads[self.offset..self.offset + self.vocab * self.dim];
         for (group, d) in tokens.chunks_exact(len).zip(dout.chunks_exact(self.dim)) {
             let count = group.iter().filter(|t| self.row(**t).is_some()).count();

@@ -4,8 +4,9 @@
 use std::collections::BTreeMap;
 
 use a2perf_core::{
-    Action, Algorithm, CancelToken, DiscardCheckpoints, Env, EnvError, EnvSpec, LearningCurve,
-    Observation, Policy, RngStream, Space, Step, Tensor, TrainingContext, TrainingSettings, Value,
+    Action, Algorithm, CancelToken, DType, DiscardCheckpoints, Env, EnvError, EnvSpec,
+    LearningCurve, Observation, Policy, RngStream, Space, Step, Tensor, TrainingContext,
+    TrainingSettings, Value,
 };
 
 /// One-step contextual bandit with masks: 4 contexts (one-hot), 6 arms; in context c, arms
@@ -181,8 +182,13 @@ impl Env for Point {
         out.terminated = false;
         out.truncated = false;
         out.info.clear();
-        match out.observation.tensors.first_mut() {
-            Some(t) => t.data[0] = self.x,
+        match out
+            .observation
+            .tensors
+            .first_mut()
+            .and_then(|t| t.data.as_f32_mut())
+        {
+            Some(d) => d[0] = self.x,
             None => out.observation = Observation::flat(vec![self.x]),
         }
         Ok(())
@@ -206,14 +212,15 @@ impl MiniWeb {
         let mut metadata = BTreeMap::new();
         metadata.insert("vocab_size".to_string(), "20".to_string());
         let b = |s: &[usize]| Space::uniform_box(s, 0.0, 20.0);
+        let ids = |s: &[usize]| Space::uniform_box_of(s, DType::I32, 0.0, 19.0);
         Self {
             spec: EnvSpec {
                 id: "MiniWeb-v0".into(),
                 observation_space: Space::Dict(vec![
-                    ("profile_keys".into(), b(&[f, t])),
-                    ("profile_values".into(), b(&[f, t])),
+                    ("profile_keys".into(), ids(&[f, t])),
+                    ("profile_values".into(), ids(&[f, t])),
                     ("profile_mask".into(), b(&[f])),
-                    ("dom_tokens".into(), b(&[e, 5, t])),
+                    ("dom_tokens".into(), ids(&[e, 5, t])),
                     ("dom_features".into(), b(&[e, 8])),
                     ("dom_mask".into(), b(&[e])),
                 ]),
@@ -232,13 +239,13 @@ impl MiniWeb {
 
     pub fn observation(&self, rng: &mut RngStream) -> Observation {
         let (f, e, t) = (self.f, self.e, self.t);
-        let mut tok = |n: usize| -> Vec<f32> {
+        let mut tok = |n: usize| -> Vec<i32> {
             (0..n)
                 .map(|i| {
                     if i % t < 2 {
-                        (1 + rng.index(19)) as f32
+                        (1 + rng.index(19)) as i32
                     } else {
-                        0.0
+                        0
                     }
                 })
                 .collect()
@@ -254,32 +261,35 @@ impl MiniWeb {
                 Tensor {
                     name: "profile_keys".into(),
                     shape: vec![f, t],
-                    data: tok(f * t),
+                    data: tok(f * t).into(),
                 },
                 Tensor {
                     name: "profile_values".into(),
                     shape: vec![f, t],
-                    data: tok(f * t),
+                    data: tok(f * t).into(),
                 },
                 Tensor {
                     name: "profile_mask".into(),
                     shape: vec![f],
-                    data: profile_mask,
+                    data: profile_mask.into(),
                 },
                 Tensor {
                     name: "dom_tokens".into(),
                     shape: vec![e, 5, t],
-                    data: tok(e * 5 * t),
+                    data: tok(e * 5 * t).into(),
                 },
                 Tensor {
                     name: "dom_features".into(),
                     shape: vec![e, 8],
-                    data: (0..e * 8).map(|_| rng.uniform_f32()).collect(),
+                    data: (0..e * 8)
+                        .map(|_| rng.uniform_f32())
+                        .collect::<Vec<f32>>()
+                        .into(),
                 },
                 Tensor {
                     name: "dom_mask".into(),
                     shape: vec![e],
-                    data: dom_mask,
+                    data: dom_mask.into(),
                 },
             ],
             action_mask: None,
@@ -311,12 +321,18 @@ pub fn mini_circuit_obs(rng: &mut RngStream) -> Observation {
             Tensor {
                 name: "features".into(),
                 shape: vec![5],
-                data: (0..5).map(|_| rng.normal() as f32).collect(),
+                data: (0..5)
+                    .map(|_| rng.normal() as f32)
+                    .collect::<Vec<f32>>()
+                    .into(),
             },
             Tensor {
                 name: "grid".into(),
                 shape: vec![2, 3, 4],
-                data: (0..24).map(|_| rng.uniform_f32()).collect(),
+                data: (0..24)
+                    .map(|_| rng.uniform_f32())
+                    .collect::<Vec<f32>>()
+                    .into(),
             },
         ],
         action_mask: Some((0..12).map(|i| i % 5 != 0).collect()),

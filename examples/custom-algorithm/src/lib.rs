@@ -86,10 +86,10 @@ impl Corridor {
 
     fn write_obs(&self, obs: &mut Observation) {
         let x = self.position as f32 / self.length as f32;
-        match obs.tensors.first_mut() {
-            Some(t) if t.data.len() == 2 => {
-                t.data[0] = x;
-                t.data[1] = 1.0;
+        match obs.tensors.first_mut().and_then(|t| t.data.as_f32_mut()) {
+            Some(d) if d.len() == 2 => {
+                d[0] = x;
+                d[1] = 1.0;
             }
             _ => *obs = Observation::flat(vec![x, 1.0]),
         }
@@ -207,7 +207,7 @@ impl Policy for LinearPolicy {
                 (0..low.len())
                     .map(|i| {
                         let t = score(i).tanh();
-                        let (l, h) = (low[i], high[i]);
+                        let (l, h) = (low[i] as f32, high[i] as f32);
                         if l.is_finite() && h.is_finite() {
                             l + (t + 1.0) * 0.5 * (h - l)
                         } else {
