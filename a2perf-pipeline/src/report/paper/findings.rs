@@ -161,7 +161,9 @@ impl FindingDef {
     pub fn evaluate(&self, side: &dyn CellSource) -> Evaluation {
         let mut missing = Vec::new();
         let (holds, text) = self.holds_when.eval(side, &mut missing);
-        missing.dedup();
+        // A cell read twice (F1's sum is on both sides of two comparisons) is named once.
+        let mut seen = std::collections::BTreeSet::new();
+        missing.retain(|m| seen.insert(m.clone()));
         Evaluation {
             holds,
             text,
@@ -528,6 +530,12 @@ mod tests {
         let e = all.evaluate(&partial);
         assert_eq!(e.holds, None);
         assert_eq!(e.missing, ["t/a/y: not run", "t/b/y: not run"]);
+        let twice = finding(
+            r#"{"id": "F", "claim": "c", "holds_when": {"all": [
+                {"less": [{"cell": "t/a/y"}, {"cell": "t/b/x"}]},
+                {"greater": [{"cell": "t/a/y"}, {"cell": "t/a/x"}]}]}}"#,
+        );
+        assert_eq!(twice.evaluate(&partial).missing, ["t/a/y: not run"]);
         assert!(e.text.ends_with("— vs —"), "{}", e.text);
         let failing = table(&[("t/a/x", 3.0, None), ("t/b/x", 2.0, None)]);
         assert_eq!(all.evaluate(&failing).holds, Some(false));
