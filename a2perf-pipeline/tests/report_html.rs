@@ -8,10 +8,12 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use a2perf_pipeline::report::html::{self, RunView};
-use a2perf_pipeline::report::paper::{FindingCheck, PaperTables, Verdict};
+use a2perf_pipeline::report::paper::{FindingCheck, PaperTables};
 use a2perf_pipeline::report::render::{format_ratio, format_value};
 use a2perf_pipeline::report::{self, Report, ReportOptions};
-use html_fixture::{SynthRun, SynthTask, paper_tables, tasks, write_failed_run, write_tree};
+use html_fixture::{
+    SynthRun, SynthTask, fill_verdicts, paper_tables, tasks, write_failed_run, write_tree,
+};
 use serde_json::Value as Json;
 
 /// A number on the page: its JSON pointer, exact value, format and displayed text.
@@ -133,44 +135,9 @@ fn check_numbers(page: &str, json: &Json) -> usize {
     numbers.len()
 }
 
-/// The verdicts and findings the paper comparison computes (filled here so that the page's
-/// rendering of them is tested whatever computes them): a return above the paper's mean
-/// beats it, one within its ± std is within, one below trails by the gap.
+/// `report` with verdicts (see [`fill_verdicts`]) and a finding whose claim holds markup.
 fn with_verdicts(mut report: Report) -> Report {
-    let ours: Vec<(String, String, String, Option<f64>)> = report
-        .groups
-        .iter()
-        .flat_map(|g| {
-            g.metrics
-                .iter()
-                .map(|m| (g.task.clone(), g.algorithm.clone(), m.key.clone(), m.mean))
-        })
-        .collect();
-    for p in &mut report.paper {
-        for col in &mut p.columns {
-            for c in &mut col.cells {
-                if !matches!(c.key.as_str(), "returns" | "generalization") {
-                    continue;
-                }
-                let mine = ours
-                    .iter()
-                    .find(|(t, a, k, _)| *t == p.task && *a == col.algorithm && *k == c.key)
-                    .and_then(|o| o.3);
-                let (Some(o), Some(pm)) = (mine, c.mean) else {
-                    continue;
-                };
-                let std = c.std.unwrap_or(0.0);
-                c.verdict = Some(if o > pm {
-                    Verdict::Beats
-                } else if o >= pm - std {
-                    Verdict::Within
-                } else {
-                    Verdict::Trails
-                });
-                c.gap = (c.verdict == Some(Verdict::Trails)).then_some(pm - o);
-            }
-        }
-    }
+    assert!(fill_verdicts(&mut report) > 0);
     report.findings.push(FindingCheck {
         id: "F1".into(),
         claim: "PPO <b>beats</b> DDQN on returns".into(),

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use a2perf_pipeline::report::html::{self, RunView};
-use a2perf_pipeline::report::paper::{PaperTables, Verdict};
+use a2perf_pipeline::report::paper::PaperTables;
 use a2perf_pipeline::report::{self, ReportOptions};
 use a2perf_web::{ChromiumBackend, ChromiumOptions, chromium_available};
 use serde_json::{Value as Json, json};
@@ -161,37 +161,7 @@ fn the_page_works_in_chromium_and_runs_no_code_from_results() {
     report::write_report_with_paper(&dirs, &out, &opts, Some(&tables)).unwrap();
     // The page as written, then with verdicts filled in (whatever computes them).
     let (mut rep, groups) = report::build_report_with_paper(&dirs, &opts, Some(&tables)).unwrap();
-    let means: Vec<(String, String, String, Option<f64>)> = rep
-        .groups
-        .iter()
-        .flat_map(|g| {
-            g.metrics
-                .iter()
-                .map(|m| (g.task.clone(), g.algorithm.clone(), m.key.clone(), m.mean))
-        })
-        .collect();
-    let mut verdicts = 0;
-    for p in &mut rep.paper {
-        for col in &mut p.columns {
-            for c in &mut col.cells {
-                let ours = means
-                    .iter()
-                    .find(|(t, a, k, _)| *t == p.task && *a == col.algorithm && *k == c.key)
-                    .and_then(|m| m.3);
-                if let (true, Some(o), Some(pm)) = (c.key == "returns", ours, c.mean) {
-                    c.verdict = Some(if o > pm {
-                        Verdict::Beats
-                    } else if o >= pm - c.std.unwrap_or(0.0) {
-                        Verdict::Within
-                    } else {
-                        Verdict::Trails
-                    });
-                    c.gap = (c.verdict == Some(Verdict::Trails)).then_some(pm - o);
-                    verdicts += 1;
-                }
-            }
-        }
-    }
+    let verdicts = html_fixture::fill_verdicts(&mut rep);
     assert!(verdicts > 0);
     let page = out.join("index.html");
     std::fs::write(&page, html::page(&rep, &RunView::of_groups(&groups, &out))).unwrap();

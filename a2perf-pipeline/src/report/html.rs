@@ -25,7 +25,7 @@ use serde::Serialize;
 
 use super::paper::{FindingCheck, PaperCell, Verdict};
 use super::render::{format_ratio, format_value};
-use super::svg::{PALETTE, nice_ticks, tick_label};
+use super::svg::{PALETTE, frame, nice_ticks, plot_ranges, tick_label};
 use super::{Category, Group, GroupReport, MetricValue, Report};
 use crate::stats::Summary;
 use crate::{
@@ -953,18 +953,10 @@ fn curves(s: &mut String, runs: &[RunView], groups: &[&GroupReport], ti: usize) 
             h / 2.0
         );
     } else {
-        if x1 <= x0 {
-            x1 = x0 + 1.0;
-        }
-        if y1 - y0 < 1e-9 {
-            y0 -= 0.5;
-            y1 += 0.5;
-        }
-        let pad = 0.05 * (y1 - y0);
-        let (y0, y1) = (y0 - pad, y1 + pad);
+        let ((x0, x1), (y0, y1)) = plot_ranges((x0, x1), (y0, y1));
         let px = |x: f64| l + (x - x0) / (x1 - x0) * pw;
         let py = |y: f64| t + ph - (y - y0) / (y1 - y0) * ph;
-        axes(s, (l, t, pw, ph), (x0, x1), (y0, y1), &px, &py);
+        frame(s, (l, t, pw, ph), (x0, x1), (y0, y1), &px, &py);
         let _ = writeln!(
             s,
             "<text x=\"{:.0}\" y=\"{:.0}\" text-anchor=\"middle\">environment steps</text><text transform=\"translate(14,{:.0}) rotate(-90)\" text-anchor=\"middle\">evaluation return</text>",
@@ -1000,42 +992,6 @@ fn curves(s: &mut String, runs: &[RunView], groups: &[&GroupReport], ti: usize) 
 
 /// Dash patterns, one per series, so that curves differ without colour.
 const DASHES: [&str; 4] = ["none", "6 3", "2 3", "8 3 2 3"];
-
-fn axes(
-    s: &mut String,
-    (l, t, pw, ph): (f64, f64, f64, f64),
-    (x0, x1): (f64, f64),
-    (y0, y1): (f64, f64),
-    px: &dyn Fn(f64) -> f64,
-    py: &dyn Fn(f64) -> f64,
-) {
-    let _ = writeln!(
-        s,
-        "<rect x=\"{l}\" y=\"{t}\" width=\"{pw}\" height=\"{ph}\" fill=\"none\" stroke=\"#444\"/>"
-    );
-    for v in nice_ticks(x0, x1) {
-        let x = px(v);
-        let _ = writeln!(
-            s,
-            "<line x1=\"{x:.1}\" y1=\"{:.1}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#444\"/><text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
-            t + ph,
-            t + ph + 5.0,
-            t + ph + 18.0,
-            tick_label(v)
-        );
-    }
-    for v in nice_ticks(y0, y1) {
-        let y = py(v);
-        let _ = writeln!(
-            s,
-            "<line x1=\"{l}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#e4e4e4\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>",
-            l + pw,
-            l - 6.0,
-            y + 4.0,
-            tick_label(v)
-        );
-    }
-}
 
 fn inference_times(s: &mut String, runs: &[RunView], groups: &[&GroupReport], ti: usize) {
     let rows: Vec<(usize, &RunView, &Summary)> = groups

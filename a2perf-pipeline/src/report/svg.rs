@@ -199,6 +199,62 @@ pub(super) fn tick_label(v: f64) -> String {
     }
 }
 
+/// The ranges a plot of points spanning `x` × `y` draws: an empty range widened, `y` padded
+/// by 5% so that no line sits on the frame.
+pub(super) fn plot_ranges(
+    (x0, mut x1): (f64, f64),
+    (mut y0, mut y1): (f64, f64),
+) -> ((f64, f64), (f64, f64)) {
+    if x1 <= x0 {
+        x1 = x0 + 1.0;
+    }
+    if y1 - y0 < 1e-9 {
+        y0 -= 0.5;
+        y1 += 0.5;
+    }
+    let pad = 0.05 * (y1 - y0);
+    ((x0, x1), (y0 - pad, y1 + pad))
+}
+
+/// A plot's frame (left, top, width, height), its ticks and the horizontal grid, for data
+/// ranges `x` × `y` mapped to the page by `px`, `py`.
+pub(super) fn frame(
+    s: &mut String,
+    (l, t, pw, ph): (f64, f64, f64, f64),
+    (x0, x1): (f64, f64),
+    (y0, y1): (f64, f64),
+    px: &dyn Fn(f64) -> f64,
+    py: &dyn Fn(f64) -> f64,
+) {
+    let _ = writeln!(
+        s,
+        r##"<rect x="{l}" y="{t}" width="{pw}" height="{ph}" fill="none" stroke="#444"/>"##
+    );
+    for v in nice_ticks(x0, x1) {
+        let x = px(v);
+        let _ = writeln!(
+            s,
+            r##"<line x1="{x:.1}" y1="{:.1}" x2="{x:.1}" y2="{:.1}" stroke="#444"/><text x="{x:.1}" y="{:.1}" text-anchor="middle">{}</text>"##,
+            t + ph,
+            t + ph + 5.0,
+            t + ph + 18.0,
+            tick_label(v)
+        );
+    }
+    for v in nice_ticks(y0, y1) {
+        let y = py(v);
+        let _ = writeln!(
+            s,
+            r##"<line x1="{:.1}" y1="{y:.1}" x2="{l}" y2="{y:.1}" stroke="#444"/><line x1="{l}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#eee"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
+            l - 5.0,
+            l + pw,
+            l - 8.0,
+            y + 4.0,
+            tick_label(v)
+        );
+    }
+}
+
 /// Training curves of one task: per algorithm the median evaluation return over seeds at each
 /// evaluation step, with the interquartile range shaded.
 pub fn curves(task: &str, groups: &[&Group]) -> String {
@@ -264,44 +320,10 @@ pub fn curves(task: &str, groups: &[&Group]) -> String {
         );
         return s;
     }
-    if x1 <= x0 {
-        x1 = x0 + 1.0;
-    }
-    if y1 - y0 < 1e-9 {
-        y0 -= 0.5;
-        y1 += 0.5;
-    }
-    let pad = 0.05 * (y1 - y0);
-    let (y0, y1) = (y0 - pad, y1 + pad);
+    let ((x0, x1), (y0, y1)) = plot_ranges((x0, x1), (y0, y1));
     let px = |x: f64| l + (x - x0) / (x1 - x0) * pw;
     let py = |y: f64| t + ph - (y - y0) / (y1 - y0) * ph;
-    let _ = writeln!(
-        s,
-        r##"<rect x="{l}" y="{t}" width="{pw}" height="{ph}" fill="none" stroke="#444"/>"##
-    );
-    for v in nice_ticks(x0, x1) {
-        let x = px(v);
-        let _ = writeln!(
-            s,
-            r##"<line x1="{x:.1}" y1="{:.1}" x2="{x:.1}" y2="{:.1}" stroke="#444"/><text x="{x:.1}" y="{:.1}" text-anchor="middle">{}</text>"##,
-            t + ph,
-            t + ph + 5.0,
-            t + ph + 18.0,
-            tick_label(v)
-        );
-    }
-    for v in nice_ticks(y0, y1) {
-        let y = py(v);
-        let _ = writeln!(
-            s,
-            r##"<line x1="{:.1}" y1="{y:.1}" x2="{l}" y2="{y:.1}" stroke="#444"/><line x1="{l}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#eee"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
-            l - 5.0,
-            l + pw,
-            l - 8.0,
-            y + 4.0,
-            tick_label(v)
-        );
-    }
+    frame(&mut s, (l, t, pw, ph), (x0, x1), (y0, y1), &px, &py);
     let _ = writeln!(
         s,
         r#"<text x="{:.0}" y="{:.0}" text-anchor="middle">environment steps</text>"#,
