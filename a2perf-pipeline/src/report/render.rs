@@ -156,7 +156,8 @@ fn holds_text(h: Option<bool>) -> &'static str {
 
 /// The findings section of `report.md`.
 fn findings_md(s: &mut String, findings: &[FindingCheck]) {
-    let esc = |t: &str| t.replace('|', "\\|");
+    // The claims come from a tables file someone else wrote: escaped like every other string.
+    let esc = md_text;
     let _ = writeln!(s, "## The paper's findings\n");
     let _ = writeln!(
         s,
@@ -180,7 +181,11 @@ fn findings_md(s: &mut String, findings: &[FindingCheck]) {
     }
     let notes: Vec<String> = findings
         .iter()
-        .filter_map(|f| f.note.as_ref().map(|n| format!("- {}: {n}", f.id)))
+        .filter_map(|f| {
+            f.note
+                .as_ref()
+                .map(|n| format!("- {}: {}", md_text(&f.id), md_text(n)))
+        })
         .collect();
     let _ = writeln!(s);
     if !notes.is_empty() {
