@@ -35,6 +35,31 @@ enum Values<'a> {
     Ints(&'a [i32]),
 }
 
+/// A value that may be stored narrowed (only once it is known to fit: see [`width_of`] and
+/// [`int_width_of`]).
+trait Narrow: Copy {
+    fn to_u8(self) -> u8;
+    fn to_u16(self) -> u16;
+}
+
+impl Narrow for f32 {
+    fn to_u8(self) -> u8 {
+        self as u8
+    }
+    fn to_u16(self) -> u16 {
+        self as u16
+    }
+}
+
+impl Narrow for i32 {
+    fn to_u8(self) -> u8 {
+        self as u8
+    }
+    fn to_u16(self) -> u16 {
+        self as u16
+    }
+}
+
 /// Narrowest exact encoding of one float: 0 = u8, 1 = u16, 2 = f32.
 fn width_of(v: f32) -> u8 {
     if v.to_bits() == f32::from(v as u8).to_bits() {
@@ -117,38 +142,42 @@ impl Column {
     fn write(&mut self, at: usize, src: Values<'_>) {
         match src {
             Values::Floats(src) => {
-                let w = src.iter().map(|v| width_of(*v)).max().unwrap_or(0);
-                self.widen(w, false);
-                match self {
-                    Column::U8(v) => v[at..at + src.len()]
-                        .iter_mut()
-                        .zip(src)
-                        .for_each(|(d, s)| *d = *s as u8),
-                    Column::U16(v) => v[at..at + src.len()]
-                        .iter_mut()
-                        .zip(src)
-                        .for_each(|(d, s)| *d = *s as u16),
-                    Column::F32(v) => v[at..at + src.len()].copy_from_slice(src),
-                    Column::I32(_) => {}
+                self.widen(src.iter().map(|v| width_of(*v)).max().unwrap_or(0), false);
+                if !self.write_narrow(at, src)
+                    && let Column::F32(v) = self
+                {
+                    v[at..at + src.len()].copy_from_slice(src);
                 }
             }
             Values::Ints(src) => {
-                let w = src.iter().map(|v| int_width_of(*v)).max().unwrap_or(0);
-                self.widen(w, true);
-                match self {
-                    Column::U8(v) => v[at..at + src.len()]
-                        .iter_mut()
-                        .zip(src)
-                        .for_each(|(d, s)| *d = *s as u8),
-                    Column::U16(v) => v[at..at + src.len()]
-                        .iter_mut()
-                        .zip(src)
-                        .for_each(|(d, s)| *d = *s as u16),
-                    Column::I32(v) => v[at..at + src.len()].copy_from_slice(src),
-                    Column::F32(_) => {}
+                self.widen(
+                    src.iter().map(|v| int_width_of(*v)).max().unwrap_or(0),
+                    true,
+                );
+                if !self.write_narrow(at, src)
+                    && let Column::I32(v) = self
+                {
+                    v[at..at + src.len()].copy_from_slice(src);
                 }
             }
         }
+    }
+
+    /// Writes `src` if the column is `u8` or `u16` (the caller widened it so that every value
+    /// fits); `false` for the widest encodings, which the caller writes itself.
+    fn write_narrow<T: Narrow>(&mut self, at: usize, src: &[T]) -> bool {
+        match self {
+            Column::U8(v) => v[at..at + src.len()]
+                .iter_mut()
+                .zip(src)
+                .for_each(|(d, s)| *d = s.to_u8()),
+            Column::U16(v) => v[at..at + src.len()]
+                .iter_mut()
+                .zip(src)
+                .for_each(|(d, s)| *d = s.to_u16()),
+            Column::F32(_) | Column::I32(_) => return false,
+        }
+        true
     }
 
     fn read_floats(&self, at: usize, dst: &mut [f32]) {
