@@ -12,7 +12,7 @@ use a2perf_pipeline::report::paper::{FindingCheck, PaperTables};
 use a2perf_pipeline::report::render::{format_ratio, format_value};
 use a2perf_pipeline::report::{self, Report, ReportOptions};
 use html_fixture::{
-    SynthRun, SynthTask, fill_verdicts, paper_tables, tasks, write_failed_run, write_tree,
+    SynthRun, SynthTask, count_verdicts, paper_tables, tasks, write_failed_run, write_tree,
 };
 use serde_json::Value as Json;
 
@@ -135,9 +135,9 @@ fn check_numbers(page: &str, json: &Json) -> usize {
     numbers.len()
 }
 
-/// `report` with verdicts (see [`fill_verdicts`]) and a finding whose claim holds markup.
+/// `report` (whose paper comparison gave verdicts) with a finding whose claim holds markup.
 fn with_verdicts(mut report: Report) -> Report {
-    assert!(fill_verdicts(&mut report) > 0);
+    assert!(count_verdicts(&report) > 0);
     report.findings.push(FindingCheck {
         id: "F1".into(),
         claim: "PPO <b>beats</b> DDQN on returns".into(),
@@ -145,6 +145,7 @@ fn with_verdicts(mut report: Report) -> Report {
         ours: "see table".into(),
         holds: Some(false),
         note: None,
+        paper_holds: Some(true),
     });
     report
 }

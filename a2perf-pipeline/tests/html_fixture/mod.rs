@@ -14,7 +14,6 @@ use a2perf_core::{
 };
 use a2perf_pipeline::generalize::TaskResult;
 use a2perf_pipeline::report::Report;
-use a2perf_pipeline::report::paper::Verdict;
 use a2perf_pipeline::stats::Summary;
 use a2perf_pipeline::train::PhaseSystem;
 use a2perf_pipeline::{
@@ -298,46 +297,14 @@ pub fn paper_tables(env_id: &str, algorithms: &[&str]) -> String {
     )
 }
 
-/// Fills the verdicts of the return and generalization cells of `report`'s paper columns the
-/// way the paper comparison defines them (above the paper's mean: beats; at or below it within
-/// its ± std: within; below: trails, by the gap), so that the page's rendering of verdicts is
-/// tested whatever computes them. Returns how many it set.
-pub fn fill_verdicts(report: &mut Report) -> usize {
-    let ours: Vec<(String, String, String, Option<f64>)> = report
-        .groups
+/// How many return and generalization cells of `report`'s paper columns carry a verdict (the
+/// paper comparison computes them; the page's tests need some of each kind to render).
+pub fn count_verdicts(report: &Report) -> usize {
+    report
+        .paper
         .iter()
-        .flat_map(|g| {
-            g.metrics
-                .iter()
-                .map(|m| (g.task.clone(), g.algorithm.clone(), m.key.clone(), m.mean))
-        })
-        .collect();
-    let mut set = 0;
-    for p in &mut report.paper {
-        for col in &mut p.columns {
-            for c in &mut col.cells {
-                if !matches!(c.key.as_str(), "returns" | "generalization") {
-                    continue;
-                }
-                let mine = ours
-                    .iter()
-                    .find(|(t, a, k, _)| *t == p.task && *a == col.algorithm && *k == c.key)
-                    .and_then(|o| o.3);
-                let (Some(o), Some(pm)) = (mine, c.mean) else {
-                    continue;
-                };
-                let verdict = if o > pm {
-                    Verdict::Beats
-                } else if o >= pm - c.std.unwrap_or(0.0) {
-                    Verdict::Within
-                } else {
-                    Verdict::Trails
-                };
-                c.verdict = Some(verdict);
-                c.gap = (verdict == Verdict::Trails).then_some(pm - o);
-                set += 1;
-            }
-        }
-    }
-    set
+        .flat_map(|p| &p.columns)
+        .flat_map(|c| &c.cells)
+        .filter(|c| c.verdict.is_some())
+        .count()
 }
