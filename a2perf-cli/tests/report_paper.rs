@@ -290,9 +290,10 @@ fn report_with_the_paper_shows_columns_ratios_verdicts_findings_and_comparison_j
             .unwrap_or_else(|| panic!("no {id} in {findings}"));
         assert!(row.ends_with(&format!("| {outcome} |")), "{row}");
     }
-    assert!(findings.contains("| 0.10 < 1.00 ms (×10.0) | 0.03 < 1.00 ms (×33.3) |"));
+    // Markdown text is HTML-escaped (`<` is `&lt;`, which renders as `<`).
+    assert!(findings.contains("| 0.10 &lt; 1.00 ms (×10.0) | 0.03 &lt; 1.00 ms (×33.3) |"));
     assert!(findings.contains("-1.00 ± 0.10 vs -1.00 ± 0.50: gap 0.00 ≤ 0.60"));
-    assert!(findings.contains("-2.00 ± 0.00 vs -1.20 ± 0.14: gap 0.80 > 0.14"));
+    assert!(findings.contains("-2.00 ± 0.00 vs -1.20 ± 0.14: gap 0.80 &gt; 0.14"));
     assert!(findings.contains("H3: judged on the direction; missing in our runs: small_macro/sac/returns: no sac runs on this task"));
 
     let report = read(&out.join("report.json"));
