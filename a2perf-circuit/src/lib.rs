@@ -9,7 +9,7 @@
 //!   blockages; they do not enter the costs, as in the reference).
 //! - [`placer`]: a deterministic force-directed standard-cell placer (ours; Google's is closed).
 //! - [`generator`]: seeded synthetic netlists for tasks that need no files.
-//! - [`env`]: the `CircuitTraining-*` environments and [`register`].
+//! - [`env`](mod@env): the `CircuitTraining-*` environments and [`register`].
 //! - [`render`]: an SVG picture of a placement.
 //!
 //! ```

@@ -2,7 +2,10 @@
 //! and exits with 75 (EX_TEMPFAIL) within the grace period; `kill -9` loses at most one
 //! checkpoint interval; a rerun of the same command finishes with the uninterrupted result; a
 //! second SIGINT exits at once with 130; with no safe point in the grace period the process exits
-//! anyway with 75 and the run continues from its last interval point.
+//! anyway with 75 and the run continues from its last interval point. One trainer per run: a
+//! second `a2perf train` (or `a2perf run`) of a run another process trains leaves it alone,
+//! names the holder's pid and host and exits with 73; the lock file a `kill -9`ed trainer leaves
+//! behind blocks nobody.
 //!
 //! Release builds only (`cargo test --release`): each test trains a few thousand steps.
 
@@ -213,6 +216,9 @@ fn sigterm_writes_a_resume_point_and_exits_75_and_kill_9_loses_at_most_an_interv
     let left = files(&run.join("resume"), "step_", ".resume");
     let newest = *left.last().unwrap();
     assert_eq!(json(&run.join("status.json"))["state"], "running");
+    // The dead trainer's record is still in the lock file; only the lock, gone with the process,
+    // could block the rerun.
+    assert_eq!(recorded_holder(&run).map(|(pid, _)| pid), Some(child.id()));
     let (status, err) = run_to_end(&["train"], &cfg);
     assert!(status.success(), "{err}");
     let segs = json(&run.join("train_segments.json"));
@@ -281,4 +287,72 @@ fn bad_grace_periods_are_refused() {
         assert_eq!(status.code(), Some(1), "{bad}: {err}");
         assert!(err.contains("--preempt-grace"), "{err}");
     }
+}
+
+/// The pid and host recorded in a run's training lock file, if any.
+fn recorded_holder(run: &Path) -> Option<(u32, String)> {
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("train.lock")).ok()?).ok()?;
+    Some((
+        u32::try_from(v["pid"].as_u64()?).ok()?,
+        v["host"].as_str()?.to_string(),
+    ))
+}
+
+/// A stopped process, continued when this is dropped (also when an assertion fails meanwhile).
+struct Frozen<'a>(&'a Child);
+
+impl Drop for Frozen<'_> {
+    fn drop(&mut self) {
+        signal(self.0, "-CONT");
+    }
+}
+
+#[test]
+fn a_second_trainer_of_a_run_leaves_it_to_the_first_and_exits_73() {
+    if skip_in_debug("a_second_trainer_of_a_run_leaves_it_to_the_first_and_exits_73") {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let cfg = config(tmp.path(), &out, 24, 2_400, 1_200);
+    let run = run_dir(&out);
+    let first = spawn(&["train"], &cfg);
+    let pid = first.id();
+    // Holding the lock, and past its first status (written under the lock).
+    wait_for("the first trainer to hold the lock", || {
+        recorded_holder(&run).is_some_and(|(p, _)| p == pid) && run.join("status.json").is_file()
+    });
+    // Stopped while it holds the lock, so that the others cannot race it to the end of training.
+    signal(&first, "-STOP");
+    let frozen = Frozen(&first);
+    let (_, host) = recorded_holder(&run).unwrap();
+    let holder = format!("pid {pid} on {host}");
+
+    let (status, err) = run_to_end(&["train"], &cfg);
+    assert_eq!(status.code(), Some(73), "{err}");
+    assert!(
+        err.contains(&holder) && err.contains(&run.display().to_string()),
+        "{err}"
+    );
+    assert!(err.contains("1 left to the other trainer"), "{err}");
+    // `run` stops after training too: the locked run is neither inferred nor reported.
+    let (status, err) = run_to_end(&["run"], &cfg);
+    assert_eq!(status.code(), Some(73), "{err}");
+    assert!(err.contains(&holder), "{err}");
+    assert!(!run.join("inference.json").exists());
+    assert!(!out.join("preempt/report").exists());
+    assert_eq!(json(&run.join("status.json"))["state"], "running");
+
+    drop(frozen);
+    let (status, err) = stderr_of(first);
+    assert!(status.success(), "{err}");
+    assert_eq!(json(&run.join("status.json"))["state"], "complete");
+    // Released, its record emptied: nobody trains the run now.
+    assert_eq!(std::fs::read(run.join("train.lock")).unwrap(), b"");
+    let (status, err) = run_to_end(&["train"], &cfg);
+    assert!(
+        status.success() && err.contains("1 already complete"),
+        "{err}"
+    );
 }

@@ -1,6 +1,6 @@
 //! The motion-imitation environment (`QuadrupedLocomotion-Dog*-v0`).
 //!
-//! Observation: one tensor `"obs"` of shape [160]:
+//! Observation: one tensor `"obs"` of shape \[160\]:
 //! `[0:12]` IMU × 3 (roll, pitch, ω_x, ω_y; newest first), `[12:48]` last action × 3 (motor-space
 //! PD targets before filtering), `[48:84]` motor angles × 3 (motor space, latency-delayed, wrapped
 //! to [−π, π)), `[84:160]` reference frames at +1, +2, +10, +30 control steps (19 values each:
@@ -38,13 +38,13 @@ use crate::sim::{RobotState, SimConfig, Simulation};
 pub const OBS_DIM: usize = 160;
 /// Physics substeps per control step.
 pub const ACTION_REPEAT: usize = 33;
-/// Physics step [s].
+/// Physics step \[s\].
 pub const SIM_DT: f64 = 0.001;
-/// Control step [s].
+/// Control step \[s\].
 pub const CONTROL_DT: f64 = SIM_DT * ACTION_REPEAT as f64;
 /// Future reference frames in the observation, in control steps.
 pub const TARGET_STEPS: [usize; 4] = [1, 2, 10, 30];
-/// Largest PD-target change allowed around the observed angle per substep [rad].
+/// Largest PD-target change allowed around the observed angle per substep \[rad\].
 pub const MAX_MOTOR_ANGLE_CHANGE: f64 = 0.2;
 /// Action bound (|a| ≤ 2π).
 pub const ACTION_LIMIT: f64 = 2.0 * PI;
@@ -101,7 +101,7 @@ pub struct EnvConfig {
     pub curriculum_steps: f64,
     /// Probability of starting at a random phase (otherwise a warm-up episode).
     pub ref_state_init_prob: f64,
-    /// Observation latency [s] (randomised in train mode).
+    /// Observation latency \[s\] (randomised in train mode).
     pub control_latency: f64,
     /// Domain randomisation, resampled at every reset: mass ×U[0.8, 1.2] and inertia ×U[0.5, 1.5]
     /// (base and leg groups), motor strength ×U[0.8, 1.2] per motor, latency U[0, 0.04] s, foot
@@ -386,7 +386,7 @@ impl LocomotionEnv {
         self.episode_limit
     }
 
-    /// Reference time [s] now.
+    /// Reference time \[s\] now.
     pub fn reference_time(&self) -> f64 {
         self.substeps as f64 * SIM_DT + self.time_offset
     }

@@ -129,7 +129,7 @@ impl Gait {
 /// Parameters of a periodic gait.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GaitParams {
-    /// Cycle period [s].
+    /// Cycle period \[s\].
     pub period: f64,
     /// Fraction of the cycle each foot is on the ground.
     pub duty: f64,
@@ -139,11 +139,11 @@ pub struct GaitParams {
     pub velocity: (f64, f64),
     /// Yaw rate [rad/s].
     pub yaw_rate: f64,
-    /// Swing apex height [m].
+    /// Swing apex height \[m\].
     pub step_height: f64,
-    /// Base COM height [m].
+    /// Base COM height \[m\].
     pub body_height: f64,
-    /// Vertical body oscillation amplitude (twice per cycle) [m].
+    /// Vertical body oscillation amplitude (twice per cycle) \[m\].
     pub bob: f64,
 }
 
@@ -163,7 +163,7 @@ pub fn generate(model: &RobotModel, gait: Gait) -> MotionClip {
 }
 
 /// Generates a clip from explicit parameters; also returns the largest inverse-kinematics
-/// residual [m] over all frames and feet (0 when every foot target was reachable).
+/// residual \[m\] over all frames and feet (0 when every foot target was reachable).
 pub fn generate_with_residual(model: &RobotModel, gait: Gait, p: &GaitParams) -> (MotionClip, f64) {
     let n_frames = ((p.period / FRAME_DURATION).round() as usize).max(2) + 1;
     let dt = p.period / (n_frames - 1) as f64;

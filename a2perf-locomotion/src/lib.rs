@@ -6,7 +6,7 @@
 //! - [`motion`]: motion_imitation JSON clips and their interpolation; [`gait`] generates the
 //!   built-in clips (pace, trot, spin, bound, pronk, side step, turn).
 //! - [`sim`]: the rapier3d world (1 ms steps, PD torques every step).
-//! - [`env`]: the imitation task (160-D observation, 5-term reward, terminations);
+//! - [`env`](mod@env): the imitation task (160-D observation, 5-term reward, terminations);
 //!   [`register`] adds `QuadrupedLocomotion-Dog{Pace,Trot,Spin}-v0` and `-Gait-v0`.
 //!
 //! ```

@@ -15,9 +15,9 @@ pub const BUILTIN_MODEL_RON: &str = include_str!("../data/laikago.ron");
 /// Mass, centre of mass and diagonal inertia of one rigid link.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LinkInertial {
-    /// Mass [kg].
+    /// Mass \[kg\].
     pub mass: f64,
-    /// Centre of mass in the link frame [m] (robot axes).
+    /// Centre of mass in the link frame \[m\] (robot axes).
     pub com: (f64, f64, f64),
     /// Principal moments of inertia about the COM [kg·m²] (robot axes).
     pub inertia: (f64, f64, f64),
@@ -282,7 +282,7 @@ impl RobotModel {
 
     /// Solves leg inverse kinematics: URDF angles placing the toe of `leg` at `target` (relative
     /// to the base COM, base axes), starting from `seed`, by damped Gauss–Newton. Returns the
-    /// angles (clamped to the joint limits) and the remaining position error [m].
+    /// angles (clamped to the joint limits) and the remaining position error \[m\].
     pub fn leg_ik(&self, leg: usize, target: Vector3<f64>, seed: [f64; 3]) -> ([f64; 3], f64) {
         let mut q = seed;
         let clamp = |q: &mut [f64; 3]| {

@@ -395,7 +395,7 @@ impl ReferenceMotion {
         self.cycle_delta_pos
     }
 
-    /// Heading change per cycle [rad].
+    /// Heading change per cycle \[rad\].
     pub fn cycle_delta_heading(&self) -> f64 {
         self.cycle_delta_heading
     }

@@ -42,7 +42,7 @@ impl LinkKind {
 /// Simulation settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimConfig {
-    /// Physics step [s].
+    /// Physics step \[s\].
     pub dt: f64,
     /// Rapier solver iterations per step. The default, 1, meets the speed target; joints then
     /// separate by at most ~2 mm under violent random actions (2 iterations: ~0.3 mm, about 35%
@@ -386,7 +386,7 @@ impl Simulation {
         &self.config
     }
 
-    /// Simulated time since construction [s].
+    /// Simulated time since construction \[s\].
     pub fn time(&self) -> f64 {
         self.time
     }
@@ -516,7 +516,7 @@ impl Simulation {
         }
     }
 
-    /// Largest separation [m] between the two bodies' copies of a joint anchor — how far the
+    /// Largest separation \[m\] between the two bodies' copies of a joint anchor — how far the
     /// impulse-joint solver lets the tree come apart (0 for an exact articulation).
     pub fn max_joint_error(&self) -> f64 {
         let mut worst = 0.0f64;

@@ -216,7 +216,7 @@ fn parse_xml(text: &str, origin: &str) -> Result<Element, UrdfError> {
 pub struct UrdfLink {
     /// Link name.
     pub name: String,
-    /// Mass [kg] (0 when the link has no `<inertial>`).
+    /// Mass \[kg\] (0 when the link has no `<inertial>`).
     pub mass: f64,
     /// Inertial origin (COM) in the link frame.
     pub com: Vector3<f64>,

@@ -5,7 +5,7 @@
 //! reliability metrics and rliable statistics, and the circuit placement cost. The Python side
 //! (`python/a2perf_rs/`) turns these into Gymnasium environments and numpy/pandas functions.
 //!
-//! One module per area: [`env`] (one environment), [`vec_env`] (N environments stepped in Rust
+//! One module per area: [`env`](mod@env) (one environment), [`vec_env`] (N environments stepped in Rust
 //! threads with the GIL released), [`metrics`], [`circuit`], [`harness`] (Python agents
 //! benchmarked by the pipelines: `TrainingRun`, `infer`, `generalize`, `collect`, `report`) with
 //! [`policy`] (Python callables as policies); [`convert`] and [`errors`] hold the conversions and
