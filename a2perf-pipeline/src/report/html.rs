@@ -164,7 +164,7 @@ pub struct RunView {
     /// The run directory relative to the page (`None` when the page is rendered without the
     /// runs, e.g. from a committed report).
     pub dir: Option<PathBuf>,
-    /// Files of [`RUN_FILES`] present in the directory.
+    /// Files of `RUN_FILES` present in the directory.
     pub files: Vec<String>,
     /// Training curve: (environment steps, evaluation return).
     pub curve: Vec<(f64, f64)>,
