@@ -107,15 +107,27 @@ impl TrainingLock {
             .truncate(false)
             .open(&path)
             .map_err(io_err(&path))?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(TryLockError::WouldBlock) => {
-                return Err(PipelineError::Locked(vec![LockedRun {
-                    run: dir.to_path_buf(),
-                    holder: read_holder(&mut file),
-                }]));
+        // A lock held with no holder recorded is either a trainer that has just taken it or one
+        // that has just released it while a child process forked by another thread of the
+        // releasing process still shares the file (until that child's exec closes it): both
+        // resolve within moments, so such a lock is tried again for a while before giving up.
+        let deadline = Instant::now() + Duration::from_secs(2);
+        loop {
+            match file.try_lock() {
+                Ok(()) => break,
+                Err(TryLockError::WouldBlock) => {
+                    let holder = read_holder(&mut file);
+                    if holder.is_some() || Instant::now() >= deadline {
+                        return Err(PipelineError::Locked(vec![LockedRun {
+                            run: dir.to_path_buf(),
+                            holder,
+                        }]));
+                    }
+                }
+                Err(TryLockError::Error(source)) => {
+                    return Err(PipelineError::Io { path, source });
+                }
             }
-            Err(TryLockError::Error(source)) => return Err(PipelineError::Io { path, source }),
         }
         // Written in place, never replaced by a rename: the lock belongs to this inode.
         let record =
@@ -148,7 +160,7 @@ impl Drop for TrainingLock {
 /// The holder's record. A holder that has just taken the lock may not have written it yet, so
 /// an empty or partial record is read again for a moment before giving up.
 fn read_holder(file: &mut File) -> Option<LockHolder> {
-    let deadline = Instant::now() + Duration::from_secs(1);
+    let deadline = Instant::now() + Duration::from_millis(200);
     loop {
         let mut text = String::new();
         let parsed = file
