@@ -15,22 +15,13 @@ use std::time::Instant;
 use a2perf_pipeline::report::html::{self, RunView};
 use a2perf_pipeline::report::paper::PaperTables;
 use a2perf_pipeline::report::{self, ReportOptions};
-use a2perf_web::{ChromiumBackend, ChromiumOptions, chromium_available};
+use a2perf_web::{ChromiumBackend, ChromiumOptions, chromium_for_tests};
 use serde_json::{Value as Json, json};
 
 const PAYLOAD: &str = "<img src=x onerror=window.__xss=1>\"'";
 
 fn chrome_or_skip() -> bool {
-    match chromium_available() {
-        Ok(()) => true,
-        Err(e) => {
-            if std::env::var("A2PERF_REQUIRE_CHROME").as_deref() == Ok("1") {
-                panic!("A2PERF_REQUIRE_CHROME=1 but {e}");
-            }
-            println!("SKIP: {e}");
-            false
-        }
-    }
+    chromium_for_tests().unwrap_or_else(|e| panic!("A2PERF_REQUIRE_CHROME=1 but {e}"))
 }
 
 /// A browser with a window large enough to look at, recording every error and console error

@@ -226,6 +226,20 @@ pub fn chromium_available() -> Result<(), WebError> {
     ChromiumOptions::from_env().check()
 }
 
+/// The rule of every browser test suite: `Ok(true)` when Chromium can be used; otherwise the
+/// reason is printed (`SKIP: …`) and `Ok(false)` returned, unless `A2PERF_REQUIRE_CHROME=1`
+/// (set by CI), where a missing browser is the `Err`.
+pub fn chromium_for_tests() -> Result<bool, WebError> {
+    match chromium_available() {
+        Ok(()) => Ok(true),
+        Err(e) if std::env::var("A2PERF_REQUIRE_CHROME").as_deref() == Ok("1") => Err(e),
+        Err(e) => {
+            println!("SKIP: {e}");
+            Ok(false)
+        }
+    }
+}
+
 fn died(what: impl std::fmt::Display) -> WebError {
     WebError::BrowserDied(what.to_string())
 }

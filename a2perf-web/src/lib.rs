@@ -101,7 +101,7 @@ use a2perf_core::{EnvEntry, EnvError, ParamKind, ParamSpec, Params, Registry, Ta
 
 pub use chromium::{
     ChromiumBackend, ChromiumOptions, SnapshotElement, TreeMemory, chromium_available,
-    other_browser_processes,
+    chromium_for_tests, other_browser_processes,
 };
 pub use design::{Design, level_of_probability, load_designs, page_difficulty, parse_designs};
 pub use dom::{ActionKind, DomState, Event, Quirks};

@@ -11,23 +11,14 @@ use a2perf_core::{Action, Env, Observation, RngStream, Step};
 use a2perf_web::site::Behaviour;
 use a2perf_web::{
     ActionSemantics, BackendKind, ChromiumBackend, ChromiumOptions, Design, Limits, Primitive,
-    TreeMemory, Vocabulary, WebNavConfig, WebNavEnv, Website, chromium_available, generate,
+    TreeMemory, Vocabulary, WebNavConfig, WebNavEnv, Website, chromium_for_tests, generate,
 };
 
 /// Geometry tolerance of the parity test, in normalised units (≈ 0.4 px on a 375 px page).
 const GEOMETRY_TOLERANCE: f32 = 1e-3;
 
 fn chrome_or_skip() -> bool {
-    match chromium_available() {
-        Ok(()) => true,
-        Err(e) => {
-            if std::env::var("A2PERF_REQUIRE_CHROME").as_deref() == Ok("1") {
-                panic!("A2PERF_REQUIRE_CHROME=1 but {e}");
-            }
-            println!("SKIP: {e}");
-            false
-        }
-    }
+    chromium_for_tests().unwrap_or_else(|e| panic!("A2PERF_REQUIRE_CHROME=1 but {e}"))
 }
 
 fn pool() -> Vec<Design> {
