@@ -12,8 +12,11 @@
 //!   environment's order, put on the legal cell nearest to its position in MacroPlacement's
 //!   `legalized.plc` (a placement made by a commercial flow), then our placer. Not a proof of a
 //!   ceiling, a reference point.
+//! - `random`: 200 episodes of uniformly random legal actions on each netlist (seeded): mean,
+//!   best and worst return, and how many episodes stranded a macro (the infeasible reward), which
+//!   tells whether an exploring agent meets the infeasible outcome at all.
 //!
-//! `cargo run --release -p a2perf-circuit --example reward_floor -- [toy|ariane|both] [DATA_DIR]`
+//! `cargo run --release -p a2perf-circuit --example reward_floor -- [toy|ariane|both|random] [DATA_DIR]`
 //! (`DATA_DIR` defaults to `../shared/data`, as `A2PERF_PAPER_DATA` does.)
 
 use std::collections::BTreeMap;
@@ -167,6 +170,65 @@ fn ariane(reg: &Registry, data: &Path) -> Result<()> {
     Ok(())
 }
 
+/// `episodes` episodes of uniformly random legal actions: (returns, stranded episodes).
+fn random_episodes(env: &mut dyn Env, episodes: u64) -> Result<(Vec<f64>, usize)> {
+    // splitmix64: enough for picking among legal cells, and no dependency for an example.
+    let mut state: u64 = 7;
+    let mut next_u64 = move || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    };
+    let (mut returns, mut stranded) = (Vec::new(), 0);
+    for ep in 0..episodes {
+        let mut obs = env.reset(Some(ep))?;
+        loop {
+            let legal = legal_actions(&obs);
+            if legal.is_empty() {
+                return Err("no legal action before the episode ended".into());
+            }
+            let a = legal[(next_u64() % legal.len() as u64) as usize];
+            let step = env.step(&Action::Discrete(a))?;
+            if step.done() {
+                if step.reward == -1.0 {
+                    stranded += 1;
+                }
+                returns.push(step.reward);
+                break;
+            }
+            obs = step.observation;
+        }
+    }
+    Ok((returns, stranded))
+}
+
+fn random(reg: &Registry, data: &Path) -> Result<()> {
+    for (id, file) in [
+        (
+            "CircuitTraining-ToyMacro-v0",
+            "circuit/toy_macro_stdcell/netlist.pb.txt",
+        ),
+        (
+            "CircuitTraining-Ariane-v0",
+            "circuit/ariane133_ng45/netlist.pb.txt.gz",
+        ),
+    ] {
+        let mut env = reg.make_env(id, &profile_params(&data.join(file)))?;
+        let (r, stranded) = random_episodes(env.as_mut(), 200)?;
+        let mean = r.iter().sum::<f64>() / r.len() as f64;
+        let best = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let worst = r.iter().copied().fold(f64::INFINITY, f64::min);
+        println!(
+            "{id}: {} random legal episodes: mean {mean:.4}, best {best:.4}, worst {worst:.4}, \
+             {stranded} stranded a macro (return -1.0)",
+            r.len()
+        );
+    }
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let which = std::env::args().nth(1).unwrap_or_else(|| "both".into());
     let data = std::env::args()
@@ -181,8 +243,11 @@ fn main() -> Result<()> {
     if matches!(which.as_str(), "ariane" | "both") {
         ariane(&reg, &data)?;
     }
-    if !matches!(which.as_str(), "toy" | "ariane" | "both") {
-        return Err(format!("unknown task `{which}` (toy, ariane or both)").into());
+    if which == "random" {
+        random(&reg, &data)?;
+    }
+    if !matches!(which.as_str(), "toy" | "ariane" | "both" | "random") {
+        return Err(format!("unknown task `{which}` (toy, ariane, both or random)").into());
     }
     Ok(())
 }

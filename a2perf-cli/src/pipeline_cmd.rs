@@ -103,6 +103,12 @@ pub struct ReportArgs {
     /// on the runs; writes comparison.json.
     #[arg(long, value_name = "TABLES_JSON")]
     pub paper: Option<PathBuf>,
+    /// DIRS are report directories (each with `report.json` and `curves.csv`, e.g.
+    /// `docs/results/*/`), not runs: merge them into one page, OUT/index.html, beside the
+    /// merged OUT/report.json its numbers refer to (IQMs and probabilities of improvement are
+    /// computed again over the merged groups). Needs `-o`, which must not be one of DIRS.
+    #[arg(long, requires = "output", conflicts_with_all = ["paper", "bootstrap_reps"])]
+    pub from_reports: bool,
 }
 
 /// Arguments of `a2perf run`.
@@ -457,8 +463,41 @@ fn write_report(
     Ok(())
 }
 
+/// `a2perf report --from-reports`: one page from report directories.
+fn page_from_reports(dirs: &[PathBuf], out: &Path) -> Result<()> {
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(d) = dirs.iter().find(|d| same(d, out)) {
+        anyhow::bail!(
+            "--from-reports: the output {} is one of the report directories read ({}); its \
+             report.json would be replaced: give another -o",
+            out.display(),
+            d.display()
+        );
+    }
+    // Everything is read and merged before anything is written.
+    let (report, page) = pipeline::report::html::page_from_report_dirs(dirs)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    a2perf_core::results::write_json_atomic(&out.join("report.json"), &report)?;
+    let index = out.join("index.html");
+    std::fs::write(&index, page).with_context(|| format!("writing {}", index.display()))?;
+    println!(
+        "page: {} (task, algorithm) groups from {} reports -> {}",
+        report.groups.len(),
+        dirs.len(),
+        index.display()
+    );
+    Ok(())
+}
+
 /// `a2perf report`.
 pub fn report(args: &ReportArgs) -> Result<()> {
+    if args.from_reports {
+        let out = args.output.as_deref().expect("clap requires -o");
+        return page_from_reports(&args.dirs, out);
+    }
     let out = args
         .output
         .clone()

@@ -144,3 +144,69 @@ fn report_with_paper_writes_the_page() {
     // Nothing to fetch: no external reference (the SVG namespace is a name, not a request).
     assert!(!page.contains("href=\"http") && !page.contains("src=\""));
 }
+
+#[test]
+fn from_reports_merges_report_directories_into_one_page() {
+    let results = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results");
+    let dirs = [
+        results.join("circuit_training_ppo"),
+        results.join("circuit_training_ddqn"),
+    ];
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("page");
+    let run = |args: &[&std::ffi::OsStr]| {
+        Command::new(env!("CARGO_BIN_EXE_a2perf"))
+            .arg("report")
+            .arg("--from-reports")
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let o = run(&[
+        dirs[0].as_os_str(),
+        dirs[1].as_os_str(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("2 (task, algorithm) groups from 2 reports"),
+        "{stdout}"
+    );
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(page.starts_with("<!DOCTYPE html>"), "{}", &page[..40]);
+    let merged: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(merged["groups"].as_array().unwrap().len(), 2);
+    // PPO and DDQN were reported apart; merged, each is compared with the other.
+    assert_eq!(
+        merged["probability_of_improvement"]
+            .as_array()
+            .unwrap()
+            .len(),
+        2
+    );
+
+    // The output may not be an input (its report.json would be replaced); -o is required; and
+    // --paper needs the runs, not reports.
+    let before = std::fs::read(dirs[0].join("report.json")).unwrap();
+    let o = run(&[dirs[0].as_os_str(), "-o".as_ref(), dirs[0].as_os_str()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("is one of the report directories read"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(dirs[0].join("report.json")).unwrap(), before);
+    let o = run(&[dirs[0].as_os_str()]);
+    assert_eq!(o.status.code(), Some(2));
+    let o = run(&[
+        dirs[0].as_os_str(),
+        "-o".as_ref(),
+        out.as_os_str(),
+        "--paper".as_ref(),
+        "x.json".as_ref(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+}

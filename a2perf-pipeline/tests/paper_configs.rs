@@ -221,21 +221,25 @@ fn the_paper_suites_plan_eight_tasks_three_algorithms_three_seeds_with_their_dat
                 algos == ["bc", "ddqn", "ppo"] || algos == ["bc", "ppo", "sac"],
                 "{suite}: {task}: {algos:?}"
             );
-            // BC's dataset is collected inside the suite from the task's two online
-            // experiments, all three seeds of each.
+            // BC's dataset is collected inside the suite from the task's online experiments
+            // (both, or the one a suite chose as the demonstrator), all three seeds of each.
             let bc = plans.iter().find(|p| p.algorithm.name == "bc").unwrap();
             let source = bc
                 .dataset_from
                 .as_ref()
                 .unwrap_or_else(|| panic!("{suite}: {task}: BC has no dataset step"));
-            let online: Vec<PathBuf> = plans
+            let demonstrators: Vec<&&ExperimentPlan> = plans
                 .iter()
                 .filter(|p| p.algorithm.name != "bc")
-                .flat_map(|p| p.seeds.iter().map(|s| p.run_dir(*s)))
+                .filter(|p| source.runs.contains(&p.run_dir(p.seeds[0])))
                 .collect();
+            assert!(!demonstrators.is_empty(), "{suite}: {task}");
             let mut runs = source.runs.clone();
             runs.sort();
-            let mut want = online.clone();
+            let mut want: Vec<PathBuf> = demonstrators
+                .iter()
+                .flat_map(|p| p.seeds.iter().map(|s| p.run_dir(*s)))
+                .collect();
             want.sort();
             assert_eq!(runs, want, "{suite}: {task}");
             assert_eq!(

@@ -328,3 +328,115 @@ fn committed_report_directories_render_without_their_runs() {
         "{err}"
     );
 }
+
+/// The committed per-domain report directories under `docs/results/`.
+fn committed_report_dirs() -> Vec<PathBuf> {
+    let results = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results");
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(&results)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|d| d.join("report.json").is_file() && d.join("curves.csv").is_file())
+        .collect();
+    dirs.sort();
+    dirs
+}
+
+#[test]
+fn a_report_merged_alone_is_the_same_report() {
+    // The IQMs and probabilities of improvement are computed again on merging, with the
+    // streams `a2perf report` uses: one report merged alone must come back unchanged.
+    for dir in committed_report_dirs() {
+        let path = dir.join("report.json");
+        let alone: Report = a2perf_core::results::read_json(&path).unwrap();
+        let merged = report::merge_reports(vec![(path.clone(), alone.clone())]).unwrap();
+        assert_eq!(merged, alone, "{}", dir.display());
+    }
+}
+
+#[test]
+fn report_directories_merge_into_one_page_whose_numbers_are_the_merged_report_json() {
+    let dirs = committed_report_dirs();
+    assert!(dirs.len() >= 2, "{dirs:?}");
+    let (merged, page) = html::page_from_report_dirs(&dirs).unwrap();
+    let parts: Vec<Report> = dirs
+        .iter()
+        .map(|d| a2perf_core::results::read_json(&d.join("report.json")).unwrap())
+        .collect();
+    assert_eq!(
+        merged.groups.len(),
+        parts.iter().map(|r| r.groups.len()).sum::<usize>()
+    );
+    // Algorithms reported apart on one task are now compared: every ordered pair of the
+    // algorithms that share a task has a probability of improvement.
+    let on = |task: &str| -> BTreeSet<&str> {
+        merged
+            .groups
+            .iter()
+            .filter(|g| g.task == task)
+            .map(|g| g.algorithm.as_str())
+            .collect()
+    };
+    let shared = merged
+        .groups
+        .iter()
+        .find(|g| on(&g.task).len() > 1)
+        .expect("two algorithms on one task");
+    let algos = on(&shared.task);
+    for x in &algos {
+        for y in algos.iter().filter(|y| y != &x) {
+            assert!(
+                merged
+                    .probability_of_improvement
+                    .iter()
+                    .any(|p| p.x == *x && p.y == *y && p.tasks.contains(&shared.task)),
+                "{x} over {y} on {}",
+                shared.task
+            );
+        }
+    }
+    // One settings entry per task, naming every algorithm of that task.
+    for s in &merged.settings {
+        assert_eq!(
+            merged.settings.iter().filter(|t| t.task == s.task).count(),
+            1
+        );
+        let named: BTreeSet<&str> = s
+            .profiles
+            .iter()
+            .flat_map(|p| p.algorithms.iter().map(String::as_str))
+            .collect();
+        assert_eq!(named, on(&s.task), "{}", s.task);
+    }
+    let json: Json = serde_json::to_value(&merged).unwrap();
+    check_numbers(&page, &json);
+    for g in &merged.groups {
+        assert!(page.contains(&html::escape(&g.task)), "{}", g.task);
+    }
+
+    // A group in two reports, and reports with different bootstrap repetitions, are refused
+    // with the file named.
+    let err = html::page_from_report_dirs(&[dirs[0].clone(), dirs[0].clone()])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("report.json") && err.contains("from one report only"),
+        "{err}"
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let mut other: Report = parts[1].clone();
+    other.bootstrap_reps += 1;
+    std::fs::write(
+        tmp.path().join("report.json"),
+        serde_json::to_string(&other).unwrap(),
+    )
+    .unwrap();
+    std::fs::copy(dirs[1].join("curves.csv"), tmp.path().join("curves.csv")).unwrap();
+    let err = html::page_from_report_dirs(&[dirs[0].clone(), tmp.path().to_path_buf()])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(&tmp.path().join("report.json").display().to_string())
+            && err.contains("bootstrap repetitions"),
+        "{err}"
+    );
+}

@@ -208,13 +208,36 @@ impl RunView {
 /// which need the run directories, are left out (and the page says so).
 pub fn page_from_report_dir(dir: &Path) -> Result<String> {
     let report: Report = a2perf_core::results::read_json(&dir.join("report.json"))?;
+    let runs = runs_of_report_dir(dir, &report)?;
+    Ok(page(&report, &runs))
+}
+
+/// One page for several report directories (each `report.json` and `curves.csv`, e.g. the
+/// per-domain reports under `docs/results/`), merged by [`super::merge_reports`]: returns the
+/// merged report, whose `report.json` the page's numbers refer to, and the page. As in
+/// [`page_from_report_dir`], run links and inference-time distributions are left out.
+pub fn page_from_report_dirs(dirs: &[PathBuf]) -> Result<(Report, String)> {
+    let mut parts = Vec::with_capacity(dirs.len());
+    let mut runs = Vec::new();
+    for dir in dirs {
+        let path = dir.join("report.json");
+        let report: Report = a2perf_core::results::read_json(&path)?;
+        runs.extend(runs_of_report_dir(dir, &report)?);
+        parts.push((path, report));
+    }
+    let merged = super::merge_reports(parts)?;
+    let page = page(&merged, &runs);
+    Ok((merged, page))
+}
+
+/// The runs of a report directory's `report.json`, with their curves from its `curves.csv`.
+fn runs_of_report_dir(dir: &Path, report: &Report) -> Result<Vec<RunView>> {
     let curves_path = dir.join("curves.csv");
     let text = std::fs::read_to_string(&curves_path).map_err(crate::io_err(&curves_path))?;
-    let runs = runs_from_curves_csv(&report, &text).map_err(|reason| PipelineError::Corrupt {
+    runs_from_curves_csv(report, &text).map_err(|reason| PipelineError::Corrupt {
         path: curves_path.clone(),
         reason,
-    })?;
-    Ok(page(&report, &runs))
+    })
 }
 
 /// One field list of a CSV line (RFC 4180 quotes, as `render::curves_csv` writes them).
@@ -431,9 +454,13 @@ fn verdict_badge(c: &PaperCell, at: &str) -> String {
         (Verdict::Trails, Some(g)) => format!(" by {}", num(g, &format!("{at}/gap"), Fmt::Value)),
         _ => String::new(),
     };
+    let (why, reach) = match &c.out_of_reach {
+        Some(r) => (format!("{why}; {r}"), " (out of reach here)"),
+        None => (why.to_string(), ""),
+    };
     format!(
-        r#" <span class="verdict verdict-{class}" title="{}">{text}{gap}</span>"#,
-        escape(why)
+        r#" <span class="verdict verdict-{class}" title="{}">{text}{gap}{reach}</span>"#,
+        escape(&why)
     )
 }
 

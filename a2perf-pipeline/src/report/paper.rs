@@ -35,6 +35,7 @@ use std::path::{Path, PathBuf};
 use a2perf_core::Value;
 use serde::{Deserialize, Serialize};
 
+use super::render::format_value;
 use super::{Group, Report};
 use crate::{PipelineError, Result};
 
@@ -106,6 +107,44 @@ pub struct PaperTask {
     /// Remarks on the whole table.
     #[serde(default)]
     pub note: Option<String>,
+    /// Ours, not the paper's: for a metric key (`returns`), the best value measured as reachable
+    /// in this project's environment, and how it was measured. A paper cell whose mean − std is
+    /// above it trails here whatever the agent, and the report says so with the number.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub ceilings: BTreeMap<String, Ceiling>,
+}
+
+/// The best value of a metric measured as reachable here ([`PaperTask::ceilings`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ceiling {
+    /// The value, in the unit of the paper's cells of that metric.
+    pub value: f64,
+    /// What reaches it and how it was measured (command, date).
+    pub how: String,
+}
+
+impl Ceiling {
+    /// Why a paper cell of `mean ± std` is out of reach, when its mean − std is above the
+    /// ceiling.
+    ///
+    /// ```
+    /// use a2perf_pipeline::report::paper::Ceiling;
+    /// let c = Ceiling { value: -0.98, how: "the best of every placement".into() };
+    /// assert!(c.out_of_reach(-0.97, Some(0.002)).unwrap().contains("-0.98"));
+    /// assert_eq!(c.out_of_reach(-0.97, Some(0.05)), None);
+    /// ```
+    pub fn out_of_reach(&self, mean: f64, std: Option<f64>) -> Option<String> {
+        let floor = mean - std.unwrap_or(0.0);
+        (floor > self.value).then(|| {
+            format!(
+                "out of reach here: {} is {}, below the paper's mean − std {}",
+                self.how,
+                self.value,
+                format_value(floor)
+            )
+        })
+    }
 }
 
 /// One published figure.
@@ -572,6 +611,10 @@ pub struct PaperCell {
     /// The phase the paper lists the metric under.
     #[serde(default)]
     pub phase: Option<Phase>,
+    /// For a `trails` verdict on a cell the task's ceiling puts out of reach
+    /// ([`PaperTask::ceilings`]): why, with the number.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub out_of_reach: Option<String>,
 }
 
 /// Metrics that get a verdict: higher is better, and the paper's ± is a spread over seeds.
@@ -701,6 +744,13 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
                                 let c = v.in_unit(&m.unit);
                                 let ratio = ratio_of(&m.key, m.mean, c.mean);
                                 let (verdict, gap) = verdict_of(&m.key, m.mean, c.mean, c.std);
+                                let out_of_reach = match (verdict, c.mean) {
+                                    (Some(Verdict::Trails), Some(mean)) => paper
+                                        .ceilings
+                                        .get(&m.key)
+                                        .and_then(|ceil| ceil.out_of_reach(mean, c.std)),
+                                    _ => None,
+                                };
                                 PaperCell {
                                     key: m.key.clone(),
                                     mean: c.mean,
@@ -719,6 +769,7 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
                                     gap,
                                     paper_metric: v.paper_metric.clone(),
                                     phase: v.phase,
+                                    out_of_reach,
                                 }
                             })
                             .collect()

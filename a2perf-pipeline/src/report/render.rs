@@ -134,13 +134,20 @@ fn paper_cell(c: Option<&PaperCell>, latex: bool) -> String {
 /// let cell = PaperCell {
 ///     key: "returns".into(), mean: Some(1.0), std: Some(0.5), unit: "100 eps.".into(),
 ///     published: None, conversion: None, ratio: None, source: None, note: None,
-///     verdict: Some(verdict), gap, paper_metric: None, phase: None,
+///     verdict: Some(verdict), gap, paper_metric: None, phase: None, out_of_reach: None,
 /// };
 /// assert_eq!(verdict_text(&cell).as_deref(), Some("trails by 0.75"));
+/// let cell = PaperCell { out_of_reach: Some("out of reach here: ...".into()), ..cell };
+/// assert_eq!(verdict_text(&cell).as_deref(), Some("trails by 0.75, out of reach here"));
 /// ```
 pub fn verdict_text(c: &PaperCell) -> Option<String> {
+    let reach = if c.out_of_reach.is_some() {
+        ", out of reach here"
+    } else {
+        ""
+    };
     c.verdict.map(|v| match (v, c.gap) {
-        (Verdict::Trails, Some(gap)) => format!("trails by {}", format_value(gap)),
+        (Verdict::Trails, Some(gap)) => format!("trails by {}{reach}", format_value(gap)),
         _ => v.as_str().to_string(),
     })
 }
@@ -345,6 +352,9 @@ fn paper_notes(p: &PaperComparison) -> Vec<String> {
             }
             if let Some(n) = &c.note {
                 parts.push(n.clone());
+            }
+            if let Some(r) = &c.out_of_reach {
+                parts.push(r.clone());
             }
             notes.push(format!(
                 "{} (paper) / {}: {}",

@@ -50,6 +50,9 @@ pub struct ComparisonCell {
     pub ratio: Option<f64>,
     /// Why ours is missing.
     pub ours_note: Option<String>,
+    /// For a `trails` verdict the task's measured ceiling explains: why, with the number.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub out_of_reach: Option<String>,
 }
 
 /// One finding's outcome.
@@ -129,6 +132,13 @@ pub fn comparison(report: &Report, groups: &[Group], tables: &PaperTables) -> Co
                 let paper_mean = theirs.and_then(|c| scale(c.mean));
                 let paper_std = theirs.and_then(|c| c.std.and_then(scale));
                 let verdict = verdict_of(key, ours_mean, paper_mean, paper_std).0;
+                let out_of_reach = match (verdict, paper_mean) {
+                    (Some(Verdict::Trails), Some(mean)) => task
+                        .ceilings
+                        .get(key)
+                        .and_then(|c| c.out_of_reach(mean, paper_std)),
+                    _ => None,
+                };
                 let ratio = ratio_of(key, ours_mean, paper_mean);
                 if key == "energy"
                     && let (Ok((gr, runs)), Some(p)) = (ours.group(&task.id, algorithm), theirs)
@@ -154,6 +164,7 @@ pub fn comparison(report: &Report, groups: &[Group], tables: &PaperTables) -> Co
                     key: key.clone(),
                     ratio,
                     ours_note,
+                    out_of_reach,
                 });
             }
         }
