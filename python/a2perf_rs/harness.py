@@ -345,14 +345,26 @@ def collect(
 
 
 def report(
-    dirs: PathLike | Iterable[PathLike], out: PathLike, *, bootstrap_reps: int | None = None
+    dirs: PathLike | Iterable[PathLike],
+    out: PathLike,
+    *,
+    bootstrap_reps: int | None = None,
+    paper: PathLike | None = None,
 ) -> dict[str, Any]:
     """``a2perf report DIRS -o OUT``: every complete run below ``dirs`` — Python agents' and
     built-in ones' alike — in one set of tables (``report.md``, ``report.tex``,
-    ``metrics.csv``), radar plots, training curves and ``leaderboard.json``; runs left out
-    (failed, interrupted, duplicate seeds) are listed with the reason. Returns ``report.json``."""
+    ``metrics.csv``), the page ``index.html``, radar plots, training curves and
+    ``leaderboard.json``; runs left out (failed, interrupted, duplicate seeds) are listed with
+    the reason. ``paper`` (e.g. ``docs/paper/tables.json``, as ``--paper``) sets the paper's
+    figures beside ours with verdicts, checks its findings and writes ``comparison.json``.
+    Returns ``report.json``."""
     if isinstance(dirs, (str, os.PathLike)):
         dirs = [dirs]
     return json.loads(
-        _native.report([os.fspath(d) for d in dirs], os.fspath(out), bootstrap_reps=bootstrap_reps)
+        _native.report(
+            [os.fspath(d) for d in dirs],
+            os.fspath(out),
+            bootstrap_reps=bootstrap_reps,
+            paper=None if paper is None else os.fspath(paper),
+        )
     )

@@ -399,12 +399,23 @@ fn collect(
     }))
 }
 
-/// `a2perf report DIRS -o OUT`; returns `report.json`.
+/// `a2perf report DIRS -o OUT [--paper TABLES]`; returns `report.json`.
 #[pyfunction]
-#[pyo3(signature = (dirs, out, bootstrap_reps=None))]
-fn report(dirs: Vec<PathBuf>, out: PathBuf, bootstrap_reps: Option<usize>) -> PyResult<String> {
+#[pyo3(signature = (dirs, out, bootstrap_reps=None, paper=None))]
+fn report(
+    dirs: Vec<PathBuf>,
+    out: PathBuf,
+    bootstrap_reps: Option<usize>,
+    paper: Option<PathBuf>,
+) -> PyResult<String> {
     existing_dirs(&dirs)?;
     let report = guard("report", || {
+        // Read before anything is written, so a bad file leaves an earlier report untouched.
+        let tables = paper
+            .as_deref()
+            .map(a2perf_pipeline::report::paper::PaperTables::load)
+            .transpose()
+            .map_err(plain)?;
         let opts = ReportOptions {
             bootstrap_reps: match bootstrap_reps {
                 Some(r) => r,
@@ -412,7 +423,8 @@ fn report(dirs: Vec<PathBuf>, out: PathBuf, bootstrap_reps: Option<usize>) -> Py
             },
             seed: 0,
         };
-        a2perf_pipeline::report::write_report(&dirs, &out, &opts).map_err(plain)
+        a2perf_pipeline::report::write_report_with_paper(&dirs, &out, &opts, tables.as_ref())
+            .map_err(plain)
     })?;
     to_json(&report)
 }

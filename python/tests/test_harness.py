@@ -430,3 +430,40 @@ def test_a_run_being_trained_is_refused_naming_its_trainer(tmp_path: Path) -> No
         with pytest.raises(a2perf_rs.RunLockedError, match=f"pid {os.getpid()} on "):
             training_run(tmp_path, seed=1).__enter__()
         first.log_evaluation(10, 0.0, 0.0)
+
+
+def test_report_with_the_papers_tables_adds_verdicts_and_comparison_json(tmp_path: Path) -> None:
+    # As `a2perf report --paper`: the paper's figures (here a one-task test paper) beside ours,
+    # a verdict per return, and comparison.json; a bad tables file is refused before anything
+    # is written.
+    run_dir = complete_run(tmp_path, seed=0)
+    a2perf_rs.infer(run_dir, first_legal)
+    ours = read(run_dir / "inference.json")
+    tables = {
+        "schema": "a2perf-paper-tables/2",
+        "paper": {"title": "Test paper", "version": "test v1"},
+        "tasks": [{
+            "id": "web_one", "title": "Web, one website", "domain": "web_navigation",
+            "table": "Table 1", "env_id": WEB, "params": WEB_PARAMS,
+            "algorithms": {"py-agent": {"returns": {
+                "mean": 1e6, "std": 1.0, "unit": "100 eps.", "paper_metric": "Returns",
+                "phase": "training", "source": "Table 1, row 'Returns'"}}},
+        }],
+    }
+    path = tmp_path / "tables.json"
+    path.write_text(json.dumps(tables))
+    report = a2perf_rs.report(tmp_path / "py-agent", tmp_path / "report", bootstrap_reps=100,
+                              paper=path)
+    [comparison] = report["paper"]
+    [cell] = comparison["columns"][0]["cells"]
+    assert cell["key"] == "returns" and cell["verdict"] == "trails"
+    assert ours["returns"]["mean"] < 1e6
+    cmp = read(tmp_path / "report" / "comparison.json")
+    assert [(c["task"], c["verdict"]) for c in cmp["cells"]] == [("web_one", "trails")]
+    assert "(paper)" in (tmp_path / "report" / "report.md").read_text()
+
+    tables["tasks"][0]["algorithms"]["py-agent"]["returns"]["std"] = -1.0
+    path.write_text(json.dumps(tables))
+    with pytest.raises(ValueError, match="tables.json"):
+        a2perf_rs.report(tmp_path / "py-agent", tmp_path / "report2", paper=path)
+    assert not (tmp_path / "report2").exists()
