@@ -37,9 +37,11 @@ fn cells(line: &str) -> Vec<String> {
 
 /// A number as the README prints it (`−1.02`, `8.61`), with its count of decimals.
 fn number(s: &str) -> Option<(f64, usize)> {
+    // Brackets, bold and a note marker (`¹`) around the figure are not part of it.
     let t = s
         .trim()
-        .trim_matches(|c: char| c == '(' || c == ')' || c == '*' || c == ',')
+        .trim_start_matches(['(', '*'])
+        .trim_end_matches(|c: char| !c.is_ascii_digit())
         .replace('−', "-");
     let decimals = t.split_once('.').map_or(0, |(_, d)| d.len());
     t.parse().ok().map(|v| (v, decimals))
