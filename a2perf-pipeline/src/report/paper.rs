@@ -114,6 +114,24 @@ pub struct PaperTask {
     pub ceilings: BTreeMap<String, Ceiling>,
 }
 
+impl PaperTask {
+    /// For a cell of metric `key` with `verdict` against the paper's `mean ± std`: why it is
+    /// out of reach here, when it trails and the task's ceiling for `key` is below the paper's
+    /// mean − std (see [`Ceiling::out_of_reach`]).
+    pub fn out_of_reach(
+        &self,
+        key: &str,
+        verdict: Option<Verdict>,
+        mean: Option<f64>,
+        std: Option<f64>,
+    ) -> Option<String> {
+        match (verdict, mean) {
+            (Some(Verdict::Trails), Some(mean)) => self.ceilings.get(key)?.out_of_reach(mean, std),
+            _ => None,
+        }
+    }
+}
+
 /// The best value of a metric measured as reachable here ([`PaperTask::ceilings`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -744,13 +762,8 @@ pub fn compare(report: &Report, groups: &[Group], tables: &PaperTables) -> Vec<P
                                 let c = v.in_unit(&m.unit);
                                 let ratio = ratio_of(&m.key, m.mean, c.mean);
                                 let (verdict, gap) = verdict_of(&m.key, m.mean, c.mean, c.std);
-                                let out_of_reach = match (verdict, c.mean) {
-                                    (Some(Verdict::Trails), Some(mean)) => paper
-                                        .ceilings
-                                        .get(&m.key)
-                                        .and_then(|ceil| ceil.out_of_reach(mean, c.std)),
-                                    _ => None,
-                                };
+                                let out_of_reach =
+                                    paper.out_of_reach(&m.key, verdict, c.mean, c.std);
                                 PaperCell {
                                     key: m.key.clone(),
                                     mean: c.mean,

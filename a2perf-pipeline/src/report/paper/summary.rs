@@ -132,13 +132,7 @@ pub fn comparison(report: &Report, groups: &[Group], tables: &PaperTables) -> Co
                 let paper_mean = theirs.and_then(|c| scale(c.mean));
                 let paper_std = theirs.and_then(|c| c.std.and_then(scale));
                 let verdict = verdict_of(key, ours_mean, paper_mean, paper_std).0;
-                let out_of_reach = match (verdict, paper_mean) {
-                    (Some(Verdict::Trails), Some(mean)) => task
-                        .ceilings
-                        .get(key)
-                        .and_then(|c| c.out_of_reach(mean, paper_std)),
-                    _ => None,
-                };
+                let out_of_reach = task.out_of_reach(key, verdict, paper_mean, paper_std);
                 let ratio = ratio_of(key, ours_mean, paper_mean);
                 if key == "energy"
                     && let (Ok((gr, runs)), Some(p)) = (ours.group(&task.id, algorithm), theirs)
