@@ -1,4 +1,5 @@
-//! Checkpoints round-trip bit-exactly and bad payloads are rejected with clear errors.
+//! Checkpoints round-trip bit-exactly and bad payloads are rejected with clear errors; taking
+//! them (and evaluating) does not change what is trained.
 
 mod common;
 
@@ -48,18 +49,27 @@ fn trained_with(
     }
 }
 
+/// Extra hyperparameters, by name.
+type Overrides = Vec<(&'static str, Value)>;
+
+/// Every online algorithm, on the discrete (`false`) or continuous (`true`) test env, with extra
+/// hyperparameters.
+fn online_variants() -> Vec<(&'static str, bool, Overrides)> {
+    let sac_norm = vec![("normalize_observations", Value::Bool(true))];
+    vec![
+        ("ppo", false, vec![]),
+        ("ppo", true, vec![]),
+        ("ddqn", false, vec![]),
+        ("sac", true, vec![]),
+        ("sac", true, sac_norm),
+    ]
+}
+
 #[test]
 fn round_trip_is_bit_exact_for_every_algorithm() {
     let reg = registry();
-    let sac_norm = [("normalize_observations", Value::Bool(true))];
-    for (name, continuous, extra) in [
-        ("ppo", false, &[][..]),
-        ("ppo", true, &[][..]),
-        ("ddqn", false, &[][..]),
-        ("sac", true, &[][..]),
-        ("sac", true, &sac_norm[..]),
-    ] {
-        let (mut policy, spec) = trained_with(name, continuous, extra);
+    for (name, continuous, extra) in online_variants() {
+        let (mut policy, spec) = trained_with(name, continuous, &extra);
         let ckpt = policy.checkpoint().unwrap();
         let bytes = ckpt.to_bytes();
         let back = Checkpoint::from_bytes(&bytes).unwrap();
@@ -169,4 +179,56 @@ fn checkpoints_flow_through_the_training_context() {
     assert!(ctx.curve().points.len() >= 4);
     let files = std::fs::read_dir(dir.path()).unwrap().count();
     assert!(files >= 3, "{files} checkpoints");
+}
+
+/// Evaluations and checkpoints observe training and must not steer it: with the same seed, a run
+/// that never evaluates or checkpoints and runs that do both, at different intervals, end with
+/// byte-identical policies, for every online algorithm.
+#[test]
+fn training_does_not_depend_on_eval_or_checkpoint_intervals() {
+    for (name, continuous, extra) in online_variants() {
+        let mut hp = vec![("hidden_sizes", ints(&[8]))];
+        hp.extend(extra.iter().cloned());
+        let mut finals = Vec::new();
+        for (eval, checkpoint) in [(0, 0), (64, 100), (37, 50)] {
+            let dir = tempfile::tempdir().unwrap();
+            let mut sink = a2perf_core::DirectoryCheckpoints::new(dir.path());
+            let factory = move |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> {
+                Ok(if continuous {
+                    Box::new(Point::new())
+                } else {
+                    Box::new(MaskedBandit::new())
+                })
+            };
+            let s = TrainingSettings {
+                eval_interval: eval,
+                checkpoint_interval: checkpoint,
+                ..settings()
+            };
+            let mut ctx = a2perf_core::TrainingContext::new(
+                &factory,
+                1,
+                s,
+                &mut sink,
+                a2perf_core::CancelToken::new(),
+            );
+            let policy =
+                a2perf_core::Algorithm::train(make_alg(name, &hp).as_mut(), &mut ctx).unwrap();
+            // The observers did run: beyond the final evaluation and checkpoint that every run
+            // takes, there are interval ones exactly when intervals are set.
+            let points = ctx.curve().points.len();
+            assert_eq!(points > 1, eval > 0, "{name}: {points} curve points");
+            let files = std::fs::read_dir(dir.path()).unwrap().count();
+            assert_eq!(
+                files > 1,
+                checkpoint > 0,
+                "{name}: {files} checkpoint files"
+            );
+            finals.push(policy.checkpoint().unwrap().to_bytes());
+        }
+        assert!(
+            finals.windows(2).all(|w| w[0] == w[1]),
+            "{name} (continuous: {continuous}, {extra:?}): the trained policy changed with the eval or checkpoint interval"
+        );
+    }
 }
