@@ -318,7 +318,7 @@ impl LocomotionEnv {
         );
         let spec = EnvSpec {
             id: config.id.clone(),
-            observation_space: observation_space(&motion),
+            observation_space: observation_space(&motion, &model),
             action_space: Space::uniform_box(
                 &[NUM_MOTORS],
                 -ACTION_LIMIT as f32,
@@ -601,7 +601,7 @@ fn rotation_error(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
     (a * b.inverse()).angle()
 }
 
-fn observation_space(motion: &ReferenceMotion) -> Space {
+fn observation_space(motion: &ReferenceMotion, model: &RobotModel) -> Space {
     let mut low = Vec::with_capacity(OBS_DIM);
     let mut high = Vec::with_capacity(OBS_DIM);
     let two_pi = 2.0 * PI as f32;
@@ -609,7 +609,7 @@ fn observation_space(motion: &ReferenceMotion) -> Space {
         low.extend([-two_pi, -two_pi, -1000.0 * two_pi, -1000.0 * two_pi]);
         high.extend([two_pi, two_pi, 1000.0 * two_pi, 1000.0 * two_pi]);
     }
-    let default = RobotModel::builtin().default_motor_angles();
+    let default = model.default_motor_angles();
     for _ in 0..3 {
         low.extend(default.iter().map(|d| *d as f32 - two_pi));
         high.extend(default.iter().map(|d| *d as f32 + two_pi));
@@ -618,7 +618,14 @@ fn observation_space(motion: &ReferenceMotion) -> Space {
         low.extend([-PI as f32; NUM_MOTORS]);
         high.extend([PI as f32; NUM_MOTORS]);
     }
-    let (jmin, jmax) = motion.joint_range();
+    // The target joints range over the clip's frames and, before the clip starts (a reset's
+    // negative reference time), the warmup's default pose. motion_imitation's bounds take the
+    // frames only, so its warmup observations fall outside its own space.
+    let (mut jmin, mut jmax) = motion.joint_range();
+    for (j, d) in model.default_urdf_angles().iter().enumerate() {
+        jmin[j] = jmin[j].min(*d);
+        jmax[j] = jmax[j].max(*d);
+    }
     for _ in TARGET_STEPS {
         low.extend([-2.0, -2.0, -2.0, -1.0, -1.0, -1.0, -1.0]);
         high.extend([2.0, 2.0, 2.0, 1.0, 1.0, 1.0, 1.0]);

@@ -252,3 +252,52 @@ fn impulse_joints_stay_together_during_a_rollout() {
     assert!(worst < 2.5e-3, "joint separation {worst} m");
     eprintln!("max joint separation over the rollout: {worst:.2e} m");
 }
+
+/// Every observation lies in the declared space: from a warmup start (negative reference time,
+/// the default pose as target), from a random phase of the clip, and across the resets random
+/// actions lead to, for every built-in gait.
+#[test]
+fn observations_stay_in_the_space_from_warmup_through_the_clip() {
+    for gait in Gait::ALL {
+        for warmup in [true, false] {
+            let mut cfg = EnvConfig::new("test", MotionSource::Generated(gait));
+            cfg.ref_state_init_prob = if warmup { 0.0 } else { 1.0 };
+            let mut e = LocomotionEnv::new(cfg).unwrap();
+            let space = e.spec().observation_space.clone();
+            let actions = e.spec().action_space.clone();
+            let a2perf_core::Space::Box { low, high, .. } = &space else {
+                panic!("box expected")
+            };
+            let (low, high) = (low.clone(), high.clone());
+            let mut rng = a2perf_core::RngStream::new(4, "observation bounds");
+            for seed in 0..3 {
+                let mut obs = e.reset(Some(seed)).unwrap();
+                for step in 0..40 {
+                    let d = obs.tensor("obs").unwrap();
+                    if !space.contains_observation(&obs) {
+                        let i = (0..low.len())
+                            .find(|&i| {
+                                let x = d.data.get_f64(i).unwrap();
+                                !(x >= low[i] && x <= high[i])
+                            })
+                            .unwrap_or(usize::MAX);
+                        panic!(
+                            "{} (warmup start: {warmup}), seed {seed}, step {step}: element {i} = \
+                             {:?} outside [{:?}, {:?}]",
+                            gait.name(),
+                            d.data.get_f64(i),
+                            low.get(i),
+                            high.get(i)
+                        );
+                    }
+                    let s = e.step(&actions.sample(&mut rng, None).unwrap()).unwrap();
+                    obs = if s.done() {
+                        e.reset(None).unwrap()
+                    } else {
+                        s.observation
+                    };
+                }
+            }
+        }
+    }
+}

@@ -268,10 +268,7 @@ def test_batches_have_the_single_spaces_dtypes(env_id, params, steps, copy) -> N
     for _ in range(5):
         arrays = obs if isinstance(obs, dict) else {"obs": obs}
         assert {k: a.dtype for k, a in arrays.items()} == want
-        # Locomotion is left out of the bounds check: a reference joint that stays at ~0 in the
-        # clip has bounds like [-1e-10, -3e-12] that the observed 0.0 falls outside of.
-        if not env_id.startswith("Quadruped"):
-            assert obs in venv.observation_space
+        assert obs in venv.observation_space
         obs, *_, infos = venv.step(_actions(venv, infos, rng))
     venv.close()
 
