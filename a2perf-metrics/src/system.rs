@@ -116,9 +116,37 @@ impl MemStats {
     }
 }
 
+/// Hands the heap's free pages back to the operating system (glibc's `malloc_trim(0)`); a no-op
+/// on other platforms.
+///
+/// glibc keeps memory a program frees for reuse, and the process's RSS goes on counting it. In a
+/// process that runs one phase after another (`a2perf run` trains, infers and evaluates every run
+/// in turn), a phase's RAM readings would then include what earlier phases freed: measured on the
+/// 2026-11-28 paper suite, web PPO's training read 0.28 GB inside the suite (after the Ariane
+/// runs) and 0.05 GB on its own. [`MemorySampler::start`] calls this first, so that a phase's
+/// readings start from what the process still holds.
+///
+/// ```
+/// a2perf_metrics::system::release_freed_memory();
+/// ```
+pub fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        unsafe extern "C" {
+            fn malloc_trim(pad: usize) -> std::ffi::c_int;
+        }
+        // SAFETY: `malloc_trim` only walks glibc's own arenas, under their locks; it takes no
+        // pointer and may be called from any thread at any time.
+        unsafe {
+            malloc_trim(0);
+        }
+    }
+}
+
 /// Samples the RAM of this process and its children on a background thread.
 ///
-/// Reports `mean_ram_gb` and `peak_ram_gb` (measured).
+/// Reports `mean_ram_gb` and `peak_ram_gb` (measured). [`start`](Meter::start) first returns
+/// freed heap memory to the system ([`release_freed_memory`]).
 pub struct MemorySampler {
     interval: Duration,
     root: Option<Pid>,
@@ -163,6 +191,7 @@ impl Meter for MemorySampler {
         self.root = Some(root);
         self.stats = Arc::default();
         self.stop = Arc::default();
+        release_freed_memory();
         refresh(&mut sys);
         let (rss, _) = process_tree(&sys, root);
         if let Ok(mut s) = self.stats.lock() {

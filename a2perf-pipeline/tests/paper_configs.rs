@@ -269,6 +269,16 @@ fn the_paper_suites_plan_eight_tasks_three_algorithms_three_seeds_with_their_dat
         .plans
     };
     let (short, long) = (load("suite.ron"), load("suite.long.ron"));
+    // Both evaluate every run 20 times, so the reliability metrics have curves to work on.
+    for p in short.iter().chain(&long) {
+        let t = &p.training;
+        assert!(
+            t.eval_interval > 0 && t.total_env_steps / t.eval_interval >= 20,
+            "{}: {} evaluations",
+            p.name,
+            t.total_env_steps / t.eval_interval.max(1)
+        );
+    }
     for (s, l) in short.iter().zip(&long) {
         assert_eq!(s.name, l.name);
         assert!(
