@@ -400,7 +400,8 @@ impl ReferenceMotion {
         self.cycle_delta_heading
     }
 
-    /// Per-joint minimum and maximum over the clip (observation bounds).
+    /// Per-joint minimum and maximum over the clip's frames (the environment's observation
+    /// bounds widen them to include the default pose shown before the clip starts).
     pub fn joint_range(&self) -> ([f64; NUM_MOTORS], [f64; NUM_MOTORS]) {
         (self.joint_min, self.joint_max)
     }
