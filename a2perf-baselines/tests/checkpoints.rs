@@ -30,23 +30,27 @@ fn trained(name: &str, continuous: bool) -> (Box<dyn Policy>, a2perf_core::EnvSp
 fn trained_with(
     name: &str,
     continuous: bool,
-    extra: &[(&str, Value)],
+    extra: &[(&'static str, Value)],
 ) -> (Box<dyn Policy>, a2perf_core::EnvSpec) {
+    let mut alg = make_alg(name, &hyperparameters(extra));
+    let (p, _) = train(alg.as_mut(), move || test_env(continuous), 1, settings());
+    (p, test_env(continuous).spec().clone())
+}
+
+/// The continuous (`Point`) or discrete (`MaskedBandit`) test environment.
+fn test_env(continuous: bool) -> Box<dyn Env> {
+    if continuous {
+        Box::new(Point::new())
+    } else {
+        Box::new(MaskedBandit::new())
+    }
+}
+
+/// A small network, with `extra` hyperparameters.
+fn hyperparameters(extra: &[(&'static str, Value)]) -> Overrides {
     let mut hp = vec![("hidden_sizes", ints(&[8]))];
     hp.extend(extra.iter().cloned());
-    let mut alg = make_alg(name, &hp);
-    if continuous {
-        let (p, _) = train(alg.as_mut(), || Box::new(Point::new()), 1, settings());
-        (p, Point::new().spec().clone())
-    } else {
-        let (p, _) = train(
-            alg.as_mut(),
-            || Box::new(MaskedBandit::new()),
-            1,
-            settings(),
-        );
-        (p, MaskedBandit::new().spec().clone())
-    }
+    hp
 }
 
 /// Extra hyperparameters, by name.
@@ -76,11 +80,7 @@ fn round_trip_is_bit_exact_for_every_algorithm() {
         let mut loaded = (reg.algorithm(name).unwrap().load_policy)(&back, &spec).unwrap();
         // Re-encoding the loaded policy gives the same bytes: parameters and statistics are exact.
         assert_eq!(loaded.checkpoint().unwrap().to_bytes(), bytes, "{name}");
-        let mut env: Box<dyn Env> = if continuous {
-            Box::new(Point::new())
-        } else {
-            Box::new(MaskedBandit::new())
-        };
+        let mut env = test_env(continuous);
         let mut obs = env.reset(Some(3)).unwrap();
         for _ in 0..5 {
             let a = policy.act(&obs, ActMode::Greedy).unwrap();
@@ -187,18 +187,13 @@ fn checkpoints_flow_through_the_training_context() {
 #[test]
 fn training_does_not_depend_on_eval_or_checkpoint_intervals() {
     for (name, continuous, extra) in online_variants() {
-        let mut hp = vec![("hidden_sizes", ints(&[8]))];
-        hp.extend(extra.iter().cloned());
+        let hp = hyperparameters(&extra);
         let mut finals = Vec::new();
         for (eval, checkpoint) in [(0, 0), (64, 100), (37, 50)] {
             let dir = tempfile::tempdir().unwrap();
             let mut sink = a2perf_core::DirectoryCheckpoints::new(dir.path());
             let factory = move |_i: usize| -> Result<Box<dyn Env>, a2perf_core::EnvError> {
-                Ok(if continuous {
-                    Box::new(Point::new())
-                } else {
-                    Box::new(MaskedBandit::new())
-                })
+                Ok(test_env(continuous))
             };
             let s = TrainingSettings {
                 eval_interval: eval,
