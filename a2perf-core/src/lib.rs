@@ -63,7 +63,9 @@ pub use registry::{
     TaskRef,
 };
 pub use render::Frame;
-pub use results::{RunDir, RunState, RunStatus, write_atomic, write_json_atomic};
+pub use results::{
+    RunDir, RunState, RunStatus, write_atomic, write_json_atomic, write_json_compact_atomic,
+};
 pub use resume::{NewestResume, ResumeDir, ResumePoint, ResumeWrite, TrainingProgress};
 pub use rng::{RngState, RngStream};
 pub use rollout::{ActMode, Episode, Transition, rollout};

@@ -91,6 +91,30 @@ pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), Res
     })
 }
 
+/// Serialises `value` as compact JSON (no whitespace) straight into the file, atomically: for
+/// large files such as datasets, where pretty-printing one number per line makes the file many
+/// times larger and the whole text need not be held in memory.
+///
+/// ```
+/// let dir = std::env::temp_dir().join(format!("a2perf-doc-compact-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir).unwrap();
+/// let p = dir.join("x.json");
+/// a2perf_core::write_json_compact_atomic(&p, &vec![1, 2, 3]).unwrap();
+/// assert_eq!(std::fs::read(&p).unwrap(), b"[1,2,3]");
+/// # std::fs::remove_dir_all(&dir).unwrap();
+/// ```
+pub fn write_json_compact_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), ResultsError> {
+    write_atomic_with(path, |f| {
+        let mut w = std::io::BufWriter::new(f);
+        serde_json::to_writer(&mut w, value).map_err(std::io::Error::from)?;
+        w.flush()
+    })
+    .map_err(|source| ResultsError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
 /// Reads and decodes a JSON results file.
 pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ResultsError> {
     let bytes = std::fs::read(path).map_err(|source| ResultsError::Io {

@@ -17,9 +17,9 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use a2perf_baselines::dataset::{Dataset, DatasetError, Sample};
 use a2perf_core::{
-    ActMode, Action, LearningCurve, Observation, Registry, RngStream, results::read_json,
-    write_json_atomic,
+    ActMode, LearningCurve, Registry, RngStream, results::read_json, write_json_atomic,
 };
 use serde::{Deserialize, Serialize};
 
@@ -184,20 +184,6 @@ pub struct CollectSummary {
     pub datasets: Vec<DatasetInfo>,
     /// Levels with no checkpoint (no dataset written), per task.
     pub empty_levels: Vec<(String, Level)>,
-}
-
-#[derive(Serialize, Deserialize)]
-struct Sample<'a> {
-    observation: std::borrow::Cow<'a, Observation>,
-    action: std::borrow::Cow<'a, Action>,
-}
-
-#[derive(Serialize)]
-struct SampleFile<'a> {
-    /// [`a2perf_baselines::dataset::DATASET_FORMAT`]: the `bc` baseline refuses other formats.
-    format: u32,
-    env_id: &'a str,
-    samples: Vec<Sample<'a>>,
 }
 
 /// Checkpoint files of a run, sorted by step.
@@ -476,7 +462,7 @@ fn write_dataset(
     let spec = env.spec().clone();
     let mut rng = RngStream::new(0, &format!("collect/{task}/{}", level.name()));
     let mut policies: BTreeMap<usize, Box<dyn a2perf_core::Policy>> = BTreeMap::new();
-    let mut samples: Vec<(Observation, Action)> = Vec::new();
+    let mut samples: Vec<Sample> = Vec::new();
     let mut episodes = Vec::with_capacity(opts.dataset_episodes);
     let mut returns = Vec::with_capacity(opts.dataset_episodes);
     let bar = progress::bar(
@@ -533,11 +519,10 @@ fn write_dataset(
             "return": ep.episode_return,
             "length": ep.length,
         }));
-        samples.extend(
-            ep.transitions
-                .into_iter()
-                .map(|t| (t.observation, t.action)),
-        );
+        samples.extend(ep.transitions.into_iter().map(|t| Sample {
+            observation: t.observation,
+            action: t.action,
+        }));
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -561,18 +546,19 @@ fn write_dataset(
         cost_rule: opts.cost,
         level_mu_sigma: mu_sigma,
     };
-    let file = SampleFile {
-        format: a2perf_baselines::dataset::DATASET_FORMAT,
-        env_id: &spec.id,
-        samples: samples
-            .iter()
-            .map(|(o, a)| Sample {
-                observation: std::borrow::Cow::Borrowed(o),
-                action: std::borrow::Cow::Borrowed(a),
-            })
-            .collect(),
-    };
-    write_json_atomic(&dir.join("samples.json"), &file)?;
+    let samples_file = dir.join("samples.json");
+    Dataset {
+        env_id: Some(spec.id.clone()),
+        samples,
+    }
+    .save_json(&samples_file)
+    .map_err(|e| match e {
+        DatasetError::Io { path, source } => PipelineError::Io { path, source },
+        other => PipelineError::Corrupt {
+            path: samples_file.clone(),
+            reason: other.to_string(),
+        },
+    })?;
     write_json_atomic(&dir.join("episodes.json"), &episodes)?;
     write_json_atomic(&dir.join(DATASET_INFO_FILE), &info)?;
     let mut extra = serde_json::Map::new();
