@@ -193,7 +193,8 @@ impl Algorithm for Bc {
         })?;
         let spec = ctx.make_env(0)?.spec().clone();
         let data = loader.load(&spec).map_err(data_err)?;
-        if data.is_empty() {
+        let n = data.len();
+        if n == 0 {
             return Err(data_err(DatasetError::Mismatch {
                 env: spec.id.clone(),
                 reason: "the dataset is empty".into(),
@@ -207,10 +208,11 @@ impl Algorithm for Bc {
         };
         let n_actions = layout.num_actions.unwrap_or(0);
         let mut store = ObsBatch::new(&layout);
-        store.resize(data.len());
-        let mut act_d = vec![0usize; data.len()];
-        let mut act_c = vec![0.0f32; data.len() * act_dim];
-        for (i, s) in data.samples.iter().enumerate() {
+        store.resize(n);
+        let mut act_d = vec![0usize; n];
+        let mut act_c = vec![0.0f32; n * act_dim];
+        // Consumed sample by sample: only the training store stays, not a second copy.
+        for (i, s) in data.samples.into_iter().enumerate() {
             store.write_row(i, &s.observation)?;
             let mismatch = |reason: String| {
                 data_err(DatasetError::Mismatch {
@@ -250,10 +252,10 @@ impl Algorithm for Bc {
         } else {
             None
         };
-        if let Some(n) = &mut obs_norm {
-            n.update(&store, data.len());
-            for i in 0..data.len() {
-                n.apply(&mut store, i);
+        if let Some(norm) = &mut obs_norm {
+            norm.update(&store, n);
+            for i in 0..n {
+                norm.apply(&mut store, i);
             }
         }
         let mut policy = NetPolicy::new("bc", &spec, head, params, obs_norm, ctx.seed())?;
@@ -283,7 +285,7 @@ impl Algorithm for Bc {
         loop {
             let b = cfg.batch_size;
             idx.clear();
-            idx.extend((0..b).map(|_| rng.index(data.len())));
+            idx.extend((0..b).map(|_| rng.index(n)));
             mb.gather(&store, &idx);
             let inv = 1.0 / b as f32;
             grads.fill(0.0);

@@ -19,6 +19,16 @@ struct FormatProbe {
     format: Option<u32>,
 }
 
+/// A dataset file as read.
+#[derive(Deserialize)]
+struct DatasetFileIn {
+    #[serde(default)]
+    format: Option<u32>,
+    #[serde(default)]
+    env_id: Option<String>,
+    samples: Vec<Sample>,
+}
+
 /// A dataset file as written.
 #[derive(Serialize)]
 struct DatasetFileOut<'a> {
@@ -87,7 +97,8 @@ impl Dataset {
     }
 
     /// Reads a dataset written by [`save_json`](Self::save_json) (or `a2perf collect`), refusing
-    /// files of another [`DATASET_FORMAT`].
+    /// files of another [`DATASET_FORMAT`]. The file is parsed as it is read, so the text is
+    /// never held in memory beside the samples.
     ///
     /// ```
     /// use a2perf_baselines::dataset::{Dataset, Sample};
@@ -100,37 +111,59 @@ impl Dataset {
     /// assert_eq!(Dataset::load_json(&path).unwrap(), d);
     /// ```
     pub fn load_json(path: &Path) -> Result<Self, DatasetError> {
-        let bytes = std::fs::read(path).map_err(|e| DatasetError::Io {
-            path: path.to_path_buf(),
-            source: e,
-        })?;
+        let open = || {
+            std::fs::File::open(path)
+                .map(std::io::BufReader::new)
+                .map_err(|e| DatasetError::Io {
+                    path: path.to_path_buf(),
+                    source: e,
+                })
+        };
         let malformed = |e: serde_json::Error| DatasetError::Malformed {
             path: path.to_path_buf(),
             reason: format!("line {}, column {}: {e}", e.line(), e.column()),
         };
-        let probe: FormatProbe = serde_json::from_slice(&bytes).map_err(malformed)?;
-        match probe.format {
-            Some(DATASET_FORMAT) => {}
-            None => {
-                return Err(DatasetError::Malformed {
+        // The format decides the message: a file of another format usually fails to parse as
+        // this one, and then it is read a second time, for its `format` field alone.
+        let (parsed, format) = match serde_json::from_reader::<_, DatasetFileIn>(open()?) {
+            Ok(file) => {
+                let format = file.format;
+                (Ok(file), format)
+            }
+            Err(e) if e.is_io() => {
+                return Err(DatasetError::Io {
                     path: path.to_path_buf(),
-                    reason: format!(
-                        "dataset of the old layout (no `format` field: every observation value, \
-                         token ids included, stored as float32); this build reads format \
-                         {DATASET_FORMAT}, with integer tensors as integers: collect it again"
-                    ),
+                    source: e.into(),
                 });
             }
-            Some(v) => {
-                return Err(DatasetError::Malformed {
-                    path: path.to_path_buf(),
-                    reason: format!(
-                        "dataset format {v} is not supported (this build reads {DATASET_FORMAT})"
-                    ),
-                });
+            Err(e) => match serde_json::from_reader::<_, FormatProbe>(open()?) {
+                Ok(probe) => (Err(e), probe.format),
+                Err(_) => return Err(malformed(e)),
+            },
+        };
+        match format {
+            Some(DATASET_FORMAT) => {
+                let file = parsed.map_err(malformed)?;
+                Ok(Self {
+                    env_id: file.env_id,
+                    samples: file.samples,
+                })
             }
+            None => Err(DatasetError::Malformed {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "dataset of the old layout (no `format` field: every observation value, \
+                     token ids included, stored as float32); this build reads format \
+                     {DATASET_FORMAT}, with integer tensors as integers: collect it again"
+                ),
+            }),
+            Some(v) => Err(DatasetError::Malformed {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "dataset format {v} is not supported (this build reads {DATASET_FORMAT})"
+                ),
+            }),
         }
-        serde_json::from_slice(&bytes).map_err(malformed)
     }
 
     /// Writes the dataset as compact JSON (atomically, streamed to the file), in format
@@ -279,6 +312,31 @@ mod tests {
         );
         assert!(!bytes.contains(&b'\n'), "a compact file has no line breaks");
         assert_eq!(Dataset::load_json(&path).unwrap(), d);
+    }
+
+    #[test]
+    fn a_truncated_or_missing_dataset_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("samples.json");
+        let d = Dataset {
+            env_id: None,
+            samples: vec![Sample {
+                observation: Observation::flat(vec![0.5, 1.5]),
+                action: Action::Discrete(1),
+            }],
+        };
+        d.save_json(&path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 10]).unwrap();
+        let err = Dataset::load_json(&path).unwrap_err();
+        assert!(matches!(err, DatasetError::Malformed { .. }), "{err:?}");
+        let msg = err.to_string();
+        assert!(msg.contains(&path.display().to_string()), "{msg}");
+        assert!(msg.contains("line 1, column"), "{msg}");
+        let missing = dir.path().join("none.json");
+        let err = Dataset::load_json(&missing).unwrap_err();
+        assert!(matches!(err, DatasetError::Io { .. }), "{err:?}");
+        assert!(err.to_string().contains("none.json"), "{err}");
     }
 
     #[test]
