@@ -46,6 +46,16 @@ pub struct Sample {
     pub action: Action,
 }
 
+impl From<a2perf_core::Transition> for Sample {
+    /// The demonstration step of a recorded transition: what was seen and what was done.
+    fn from(t: a2perf_core::Transition) -> Self {
+        Self {
+            observation: t.observation,
+            action: t.action,
+        }
+    }
+}
+
 /// Demonstrations in memory.
 ///
 /// ```
@@ -85,10 +95,7 @@ impl Dataset {
         let mut samples = Vec::new();
         for e in 0..episodes {
             let ep = rollout(env, policy, seed.wrapping_add(e as u64), mode, true)?;
-            samples.extend(ep.transitions.into_iter().map(|t| Sample {
-                observation: t.observation,
-                action: t.action,
-            }));
+            samples.extend(ep.transitions.into_iter().map(Sample::from));
         }
         Ok(Self {
             env_id: Some(env.spec().id.clone()),

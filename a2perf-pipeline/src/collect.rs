@@ -519,10 +519,7 @@ fn write_dataset(
             "return": ep.episode_return,
             "length": ep.length,
         }));
-        samples.extend(ep.transitions.into_iter().map(|t| Sample {
-            observation: t.observation,
-            action: t.action,
-        }));
+        samples.extend(ep.transitions.into_iter().map(Sample::from));
         bar.inc(1);
     }
     bar.finish_and_clear();
