@@ -20,6 +20,7 @@ use crate::model::NetOptions;
 use crate::nn::dist::{gaussian, masked};
 use crate::nn::optim::{Adam, LrSchedule};
 use crate::nn::{MlpWs, clip_grad_norm, ensure};
+use crate::obs_store::ObsStore;
 use crate::policy::{Head, NetPolicy, ObsNorm};
 use crate::resume::{StateReader, StateWriter, resume_err};
 
@@ -28,8 +29,9 @@ use crate::resume::{StateReader, StateWriter, resume_err};
 const STATE_VERSION: u32 = 2;
 
 /// FNV-1a over the demonstrations as loaded (observations and actions), so that a run is not
-/// resumed on a dataset that changed.
-fn fingerprint(store: &ObsBatch, act_d: &[usize], act_c: &[f32]) -> u64 {
+/// resumed on a dataset that changed: tensor by tensor, each one's values over every sample
+/// (floats as bits, integers as `u32`), then every sample's action mask, then the actions.
+fn fingerprint(store: &ObsStore, layout: &ObsLayout, act_d: &[usize], act_c: &[f32]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     let mut eat = |x: u64| {
         for b in x.to_le_bytes() {
@@ -37,16 +39,26 @@ fn fingerprint(store: &ObsBatch, act_d: &[usize], act_c: &[f32]) -> u64 {
             h = h.wrapping_mul(0x0000_0100_0000_01B3);
         }
     };
-    for t in 0..store.num_tensors() {
-        for v in store.tensor(t) {
-            eat(u64::from(v.to_bits()));
-        }
-        for v in store.ints(t) {
-            eat(u64::from(*v as u32));
+    let n = act_d.len();
+    let mut row = ObsBatch::new(layout);
+    row.resize(1);
+    for t in 0..row.num_tensors() {
+        for slot in 0..n {
+            store.read_tensor(slot, t, &mut row, 0);
+            if row.is_integer(t) {
+                for v in row.int_row(t, 0) {
+                    eat(u64::from(*v as u32));
+                }
+            } else {
+                for v in row.tensor_row(t, 0) {
+                    eat(u64::from(v.to_bits()));
+                }
+            }
         }
     }
-    for row in 0..store.len() {
-        for legal in store.mask(row).unwrap_or(&[]) {
+    for slot in 0..n {
+        store.read_mask(slot, &mut row, 0);
+        for legal in row.mask(0).unwrap_or(&[]) {
             eat(u64::from(*legal));
         }
     }
@@ -192,14 +204,6 @@ impl Algorithm for Bc {
             )
         })?;
         let spec = ctx.make_env(0)?.spec().clone();
-        let data = loader.load(&spec).map_err(data_err)?;
-        let n = data.len();
-        if n == 0 {
-            return Err(data_err(DatasetError::Mismatch {
-                env: spec.id.clone(),
-                reason: "the dataset is empty".into(),
-            }));
-        }
         let layout = ObsLayout::from_spec(&spec)?;
         let head = head_for(&spec, &layout, &cfg.net, false)?;
         let act_dim = match &head {
@@ -207,40 +211,51 @@ impl Algorithm for Bc {
             _ => 0,
         };
         let n_actions = layout.num_actions.unwrap_or(0);
-        let mut store = ObsBatch::new(&layout);
-        store.resize(n);
-        let mut act_d = vec![0usize; n];
-        let mut act_c = vec![0.0f32; n * act_dim];
-        // Consumed sample by sample: only the training store stays, not a second copy.
-        for (i, s) in data.samples.into_iter().enumerate() {
-            store.write_row(i, &s.observation)?;
-            let mismatch = |reason: String| {
-                data_err(DatasetError::Mismatch {
-                    env: spec.id.clone(),
-                    reason,
-                })
-            };
-            match (&s.action, act_dim) {
-                (Action::Discrete(a), 0) => {
-                    if *a >= n_actions || !store.mask(i).is_none_or(|m| m[*a]) {
+        // The demonstrations' observations, compact and exact (see `obs_store`: a netlist's
+        // adjacency is kept once, token ids in a byte or two, masks in bits); sample `i` is slot
+        // `i`. The loader hands the samples over one at a time (a JSON file is parsed as it is
+        // read), so the dataset is never held whole beside the store.
+        let mut store = ObsStore::new(&layout);
+        let mut row = ObsBatch::new(&layout);
+        row.resize(1);
+        let (mut act_d, mut act_c) = (Vec::new(), Vec::new());
+        let mismatch = |reason: String| DatasetError::Mismatch {
+            env: spec.id.clone(),
+            reason,
+        };
+        let n = loader
+            .for_each_sample(&spec, &mut |s| {
+                let i = act_d.len();
+                row.write_row(0, &s.observation)
+                    .map_err(|e| mismatch(format!("sample {i}: {e}")))?;
+                match (&s.action, act_dim) {
+                    (Action::Discrete(a), 0) => {
+                        if *a >= n_actions || !row.mask(0).is_none_or(|m| m[*a]) {
+                            return Err(mismatch(format!(
+                                "sample {i}: action {a} is out of range or masked out"
+                            )));
+                        }
+                        act_d.push(*a);
+                    }
+                    (Action::Continuous(v), d) if v.len() == d && d > 0 => {
+                        act_d.push(0);
+                        act_c.extend_from_slice(v);
+                    }
+                    _ => {
                         return Err(mismatch(format!(
-                            "sample {i}: action {a} is out of range or masked out"
+                            "sample {i}: action {:?} does not fit the action space",
+                            s.action
                         )));
                     }
-                    act_d[i] = *a;
                 }
-                (Action::Continuous(v), d) if v.len() == d && d > 0 => {
-                    act_c[i * d..(i + 1) * d].copy_from_slice(v);
-                }
-                _ => {
-                    return Err(mismatch(format!(
-                        "sample {i}: action {:?} does not fit the action space",
-                        s.action
-                    )));
-                }
-            }
+                store.insert(&row, 0);
+                Ok(())
+            })
+            .map_err(data_err)?;
+        if n == 0 {
+            return Err(data_err(mismatch("the dataset is empty".into())));
         }
-        let data_fingerprint = fingerprint(&store, &act_d, &act_c);
+        let data_fingerprint = fingerprint(&store, &layout, &act_d, &act_c);
         let mut init_rng = ctx.rng("bc/init");
         let params = match &head {
             Head::Discrete(net) => net.init_params(&mut init_rng),
@@ -252,10 +267,22 @@ impl Algorithm for Bc {
         } else {
             None
         };
+        // The normalised tensors (`[n, dim]` each), decoded and normalised once: minibatches
+        // read them from here, every other tensor from the store.
+        let mut normalised: Vec<(usize, Vec<f32>)> = Vec::new();
         if let Some(norm) = &mut obs_norm {
-            norm.update(&store, n);
-            for i in 0..n {
-                norm.apply(&mut store, i);
+            for (&t, stats) in norm.tensors.iter().zip(norm.stats.iter_mut()) {
+                let d = layout.dim(t);
+                let mut all = vec![0.0f32; n * d];
+                for (slot, dst) in all.chunks_exact_mut(d.max(1)).enumerate().take(n) {
+                    store.read_tensor(slot, t, &mut row, 0);
+                    dst.copy_from_slice(row.tensor_row(t, 0));
+                }
+                stats.update(&all, n);
+                for r in all.chunks_exact_mut(d.max(1)) {
+                    stats.apply(r);
+                }
+                normalised.push((t, all));
             }
         }
         let mut policy = NetPolicy::new("bc", &spec, head, params, obs_norm, ctx.seed())?;
@@ -286,7 +313,14 @@ impl Algorithm for Bc {
             let b = cfg.batch_size;
             idx.clear();
             idx.extend((0..b).map(|_| rng.index(n)));
-            mb.gather(&store, &idx);
+            mb.resize(b);
+            for (k, &r) in idx.iter().enumerate() {
+                store.read(r, &mut mb, k);
+                for (t, all) in &normalised {
+                    let d = layout.dim(*t);
+                    mb.row_mut(*t, k).copy_from_slice(&all[r * d..(r + 1) * d]);
+                }
+            }
             let inv = 1.0 / b as f32;
             grads.fill(0.0);
             match &mut policy.head {

@@ -173,6 +173,70 @@ impl Dataset {
         }
     }
 
+    /// Reads a dataset file as [`load_json`](Self::load_json) does, but hands each sample to
+    /// `each` as soon as it is parsed instead of collecting them: one sample is held at a time,
+    /// whatever the size of the file. Returns the number of samples. An error of `each` stops
+    /// the reading and is returned as it is; a file that does not read as a dataset of this
+    /// format gets `load_json`'s error.
+    ///
+    /// ```
+    /// use a2perf_baselines::dataset::{Dataset, Sample};
+    /// use a2perf_core::{Action, Observation};
+    /// let path = std::env::temp_dir().join(format!("a2perf-doc-stream-{}.json", std::process::id()));
+    /// let mut d = Dataset::default();
+    /// for a in 0..3 {
+    ///     d.samples.push(Sample { observation: Observation::flat(vec![0.5]), action: Action::Discrete(a) });
+    /// }
+    /// d.save_json(&path).unwrap();
+    /// let mut actions = Vec::new();
+    /// let n = Dataset::for_each_json_sample(&path, &mut |s| {
+    ///     actions.push(s.action);
+    ///     Ok(())
+    /// })
+    /// .unwrap();
+    /// assert_eq!((n, actions.len()), (3, 3));
+    /// std::fs::remove_file(&path).unwrap();
+    /// ```
+    pub fn for_each_json_sample(
+        path: &Path,
+        each: &mut dyn FnMut(Sample) -> Result<(), DatasetError>,
+    ) -> Result<usize, DatasetError> {
+        let file = std::fs::File::open(path).map_err(|e| DatasetError::Io {
+            path: path.to_path_buf(),
+            source: e,
+        })?;
+        let mut sink = SampleSink {
+            each,
+            stopped: None,
+            count: 0,
+            format: None,
+            saw_samples: false,
+        };
+        let mut de = serde_json::Deserializer::from_reader(std::io::BufReader::new(file));
+        let parsed =
+            serde::de::DeserializeSeed::deserialize(&mut sink, &mut de).and_then(|()| de.end());
+        if let Some(e) = sink.stopped {
+            return Err(e);
+        }
+        match parsed {
+            Ok(()) if sink.saw_samples && sink.format == Some(DATASET_FORMAT) => Ok(sink.count),
+            Err(e) if e.is_io() => Err(DatasetError::Io {
+                path: path.to_path_buf(),
+                source: e.into(),
+            }),
+            // Not a dataset of this format as written (or a field order this reader does not
+            // stream): the whole-file reader gives the error, or the samples.
+            _ => {
+                let rest = Self::load_json(path)?;
+                let n = rest.samples.len();
+                for s in rest.samples.into_iter().skip(sink.count) {
+                    (sink.each)(s)?;
+                }
+                Ok(n)
+            }
+        }
+    }
+
     /// Writes the dataset as compact JSON (atomically, streamed to the file), in format
     /// [`DATASET_FORMAT`]. Compact because a dataset is mostly numbers: pretty-printed, each takes
     /// a line of its own, and 100 web-navigation episodes came to 786 MB instead of 170 MB.
@@ -191,6 +255,78 @@ impl Dataset {
                 reason: other.to_string(),
             },
         })
+    }
+}
+
+/// What [`Dataset::for_each_json_sample`] keeps while it walks a file: the samples go to `each`
+/// as they are parsed (after a `format` of this build; the writer puts it first).
+struct SampleSink<'a> {
+    each: &'a mut dyn FnMut(Sample) -> Result<(), DatasetError>,
+    /// The error `each` stopped the walk with.
+    stopped: Option<DatasetError>,
+    /// Samples handed to `each`.
+    count: usize,
+    format: Option<u32>,
+    saw_samples: bool,
+}
+
+impl<'de> serde::de::DeserializeSeed<'de> for &mut SampleSink<'_> {
+    type Value = ();
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_map(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for &mut SampleSink<'_> {
+    type Value = ();
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a dataset object")
+    }
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        use serde::de::Error;
+        while let Some(key) = map.next_key::<String>()? {
+            match key.as_str() {
+                "format" => self.format = map.next_value()?,
+                "samples" if self.format == Some(DATASET_FORMAT) => {
+                    self.saw_samples = true;
+                    map.next_value_seed(SampleSeq(&mut *self))?;
+                }
+                // Samples of an unknown or missing format: the whole-file reader says which.
+                "samples" => return Err(A::Error::custom("samples before a supported format")),
+                _ => {
+                    map.next_value::<serde::de::IgnoredAny>()?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The `samples` array of a dataset file, walked element by element.
+struct SampleSeq<'s, 'a>(&'s mut SampleSink<'a>);
+
+impl<'de> serde::de::DeserializeSeed<'de> for SampleSeq<'_, '_> {
+    type Value = ();
+    fn deserialize<D: serde::Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_seq(self)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for SampleSeq<'_, '_> {
+    type Value = ();
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("an array of samples")
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        use serde::de::Error;
+        while let Some(sample) = seq.next_element::<Sample>()? {
+            if let Err(e) = (self.0.each)(sample) {
+                self.0.stopped = Some(e);
+                return Err(A::Error::custom("stopped by the consumer"));
+            }
+            self.0.count += 1;
+        }
+        Ok(())
     }
 }
 
@@ -228,11 +364,41 @@ pub enum DatasetError {
 pub trait DatasetLoader: Send + Sync {
     /// The dataset for `spec`.
     fn load(&self, spec: &EnvSpec) -> Result<Dataset, DatasetError>;
+
+    /// Hands the samples of the dataset for `spec` to `each`, in order, and returns their number;
+    /// an error of `each` stops the reading and is returned. The default loads the dataset
+    /// ([`load`](Self::load)) first; a loader that can read sample by sample (as
+    /// [`JsonDatasetFile`] does) overrides it, so that a consumer keeping the samples in its own
+    /// form (behavioural cloning's compact store) never holds the whole dataset twice.
+    fn for_each_sample(
+        &self,
+        spec: &EnvSpec,
+        each: &mut dyn FnMut(Sample) -> Result<(), DatasetError>,
+    ) -> Result<usize, DatasetError> {
+        let data = self.load(spec)?;
+        let n = data.samples.len();
+        for s in data.samples {
+            each(s)?;
+        }
+        Ok(n)
+    }
 }
 
 impl DatasetLoader for Dataset {
     fn load(&self, _spec: &EnvSpec) -> Result<Dataset, DatasetError> {
         Ok(self.clone())
+    }
+
+    /// Clones one sample at a time, not the whole dataset.
+    fn for_each_sample(
+        &self,
+        _spec: &EnvSpec,
+        each: &mut dyn FnMut(Sample) -> Result<(), DatasetError>,
+    ) -> Result<usize, DatasetError> {
+        for s in &self.samples {
+            each(s.clone())?;
+        }
+        Ok(self.samples.len())
     }
 }
 
@@ -243,6 +409,15 @@ pub struct JsonDatasetFile(pub PathBuf);
 impl DatasetLoader for JsonDatasetFile {
     fn load(&self, _spec: &EnvSpec) -> Result<Dataset, DatasetError> {
         Dataset::load_json(&self.0)
+    }
+
+    /// Parses the file as it goes ([`Dataset::for_each_json_sample`]).
+    fn for_each_sample(
+        &self,
+        _spec: &EnvSpec,
+        each: &mut dyn FnMut(Sample) -> Result<(), DatasetError>,
+    ) -> Result<usize, DatasetError> {
+        Dataset::for_each_json_sample(&self.0, each)
     }
 }
 
@@ -344,6 +519,117 @@ mod tests {
         let err = Dataset::load_json(&missing).unwrap_err();
         assert!(matches!(err, DatasetError::Io { .. }), "{err:?}");
         assert!(err.to_string().contains("none.json"), "{err}");
+    }
+
+    fn five_samples() -> Dataset {
+        Dataset {
+            env_id: Some("Toy-v0".into()),
+            samples: (0..5)
+                .map(|a| Sample {
+                    observation: Observation {
+                        tensors: vec![
+                            a2perf_core::Tensor::new("x", &[2], vec![a as f32 * 0.25, -0.0]),
+                            a2perf_core::Tensor::new("ids", &[1], vec![(1 << 24) + a as i32]),
+                        ],
+                        action_mask: Some(vec![true, a % 2 == 0]),
+                    },
+                    action: Action::Discrete(a),
+                })
+                .collect(),
+        }
+    }
+
+    /// The streamed samples are the loaded ones, in order, and each is handed over as it is
+    /// parsed.
+    #[test]
+    fn samples_stream_in_order_and_equal_the_loaded_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("samples.json");
+        let d = five_samples();
+        d.save_json(&path).unwrap();
+        let mut seen = Vec::new();
+        let n = Dataset::for_each_json_sample(&path, &mut |s| {
+            seen.push(s);
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(n, 5);
+        assert_eq!(seen, Dataset::load_json(&path).unwrap().samples);
+        assert_eq!(seen, d.samples);
+        // The loader trait's streaming gives the same, from the file and from memory.
+        let spec = EnvSpec {
+            id: "Toy-v0".into(),
+            observation_space: a2perf_core::Space::uniform_box(&[1], 0.0, 1.0),
+            action_space: a2perf_core::Space::Discrete { n: 2 },
+            max_episode_steps: None,
+            metadata: Default::default(),
+        };
+        for loader in [
+            &JsonDatasetFile(path.clone()) as &dyn DatasetLoader,
+            &d as &dyn DatasetLoader,
+        ] {
+            let mut again = Vec::new();
+            let n = loader
+                .for_each_sample(&spec, &mut |s| {
+                    again.push(s);
+                    Ok(())
+                })
+                .unwrap();
+            assert_eq!((n, &again), (5, &d.samples));
+        }
+    }
+
+    /// An error of the consumer stops the reading at that sample and comes back unchanged.
+    #[test]
+    fn a_consumer_error_stops_the_stream() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("samples.json");
+        five_samples().save_json(&path).unwrap();
+        let mut calls = 0;
+        let err = Dataset::for_each_json_sample(&path, &mut |_| {
+            calls += 1;
+            if calls == 2 {
+                return Err(DatasetError::Mismatch {
+                    env: "Toy-v0".into(),
+                    reason: "sample 1: no".into(),
+                });
+            }
+            Ok(())
+        })
+        .unwrap_err();
+        assert_eq!(calls, 2);
+        assert!(
+            matches!(&err, DatasetError::Mismatch { reason, .. } if reason == "sample 1: no"),
+            "{err:?}"
+        );
+    }
+
+    /// Files that are not datasets of this format get the whole-file reader's error: old
+    /// layout, unknown format, truncated, missing.
+    #[test]
+    fn the_stream_refuses_what_load_json_refuses_with_its_message() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("samples.json");
+        let mut cases: Vec<Vec<u8>> = vec![
+            br#"{"env_id":null,"samples":[{"observation":{"tensors":[{"name":"x","shape":[1],"data":[3.0]}],"action_mask":null},"action":{"Discrete":1}}]}"#.to_vec(),
+            br#"{"format":7,"env_id":null,"samples":[]}"#.to_vec(),
+            br#"{"format":2,"env_id":null}"#.to_vec(),
+        ];
+        five_samples().save_json(&path).unwrap();
+        let whole = std::fs::read(&path).unwrap();
+        cases.push(whole[..whole.len() - 40].to_vec());
+        for bytes in cases {
+            std::fs::write(&path, &bytes).unwrap();
+            let want = Dataset::load_json(&path).unwrap_err().to_string();
+            let got = Dataset::for_each_json_sample(&path, &mut |_| Ok(()))
+                .unwrap_err()
+                .to_string();
+            assert_eq!(got, want);
+            assert!(got.contains(&path.display().to_string()), "{got}");
+        }
+        let missing = dir.path().join("none.json");
+        let err = Dataset::for_each_json_sample(&missing, &mut |_| Ok(())).unwrap_err();
+        assert!(matches!(err, DatasetError::Io { .. }), "{err:?}");
     }
 
     #[test]

@@ -26,6 +26,7 @@ pub mod dataset;
 pub mod ddqn;
 pub mod model;
 pub mod nn;
+mod obs_store;
 pub mod policy;
 pub mod ppo;
 pub mod replay;

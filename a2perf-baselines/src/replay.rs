@@ -1,382 +1,20 @@
 //! A fixed-capacity ring buffer of transitions for off-policy algorithms, storing observations
 //! compactly and exactly.
 //!
-//! Two things keep web-navigation replay small without changing a single sampled value:
-//!
-//! - **Each observation is stored once.** Within an episode the next observation of step `t` is
-//!   the observation of step `t + 1`; a transition refers to observation *slots* by index, and a
-//!   stream's (environment's) new observation reuses the previous transition's next slot when the
-//!   two are equal (checked, not assumed). Slots are reference-counted and recycled.
-//! - **Each tensor is stored in the narrowest exact type.** A tensor column starts as `u8` and is
-//!   widened (`u8 → u16 → f32` for a float tensor, `u8 → u16 → i32` for an integer one) the first
-//!   time a value does not fit, so token ids cost one or two bytes instead of four, float features
-//!   stay `f32`, and the action mask costs one bit per action. A float is narrowed only if it
-//!   converts back to the identical `f32` bit pattern.
+//! **Each observation is stored once.** Within an episode the next observation of step `t` is
+//! the observation of step `t + 1`; a transition refers to observation *slots* of a store by
+//! index, and a stream's (environment's) new observation reuses the previous transition's next
+//! slot when the two are equal (checked, not assumed). Slots are reference-counted and recycled.
+//! The store keeps each tensor in its narrowest exact type (token ids in one or two bytes, the
+//! action mask in one bit per action) and a tensor that never changes (a netlist's adjacency)
+//! once, not per slot. Nothing of this changes a sampled value.
 //!
 //! The buffer knows nothing about domains: it sees only the observation layout's tensors.
 
 use a2perf_core::{Observation, PolicyError, RngStream};
 
 use crate::batch::{ObsBatch, ObsLayout};
-
-/// One tensor of every slot, `[slots, dim]`, in the narrowest type that holds it exactly. A float
-/// tensor's column widens `u8 → u16 → f32`, an integer tensor's `u8 → u16 → i32`.
-#[derive(Clone, Debug)]
-enum Column {
-    U8(Vec<u8>),
-    U16(Vec<u16>),
-    F32(Vec<f32>),
-    I32(Vec<i32>),
-}
-
-/// One row of values on its way in or out of a column.
-enum Values<'a> {
-    Floats(&'a [f32]),
-    Ints(&'a [i32]),
-}
-
-/// A value that may be stored narrowed (only once it is known to fit: see [`width_of`] and
-/// [`int_width_of`]).
-trait Narrow: Copy {
-    fn to_u8(self) -> u8;
-    fn to_u16(self) -> u16;
-}
-
-impl Narrow for f32 {
-    fn to_u8(self) -> u8 {
-        self as u8
-    }
-    fn to_u16(self) -> u16 {
-        self as u16
-    }
-}
-
-impl Narrow for i32 {
-    fn to_u8(self) -> u8 {
-        self as u8
-    }
-    fn to_u16(self) -> u16 {
-        self as u16
-    }
-}
-
-/// Narrowest exact encoding of one float: 0 = u8, 1 = u16, 2 = f32.
-fn width_of(v: f32) -> u8 {
-    if v.to_bits() == f32::from(v as u8).to_bits() {
-        0
-    } else if v.to_bits() == f32::from(v as u16).to_bits() {
-        1
-    } else {
-        2
-    }
-}
-
-/// Narrowest exact encoding of one integer: 0 = u8, 1 = u16, 2 = i32.
-fn int_width_of(v: i32) -> u8 {
-    if u8::try_from(v).is_ok() {
-        0
-    } else if u16::try_from(v).is_ok() {
-        1
-    } else {
-        2
-    }
-}
-
-impl Column {
-    fn width(&self) -> u8 {
-        match self {
-            Column::U8(_) => 0,
-            Column::U16(_) => 1,
-            Column::F32(_) | Column::I32(_) => 2,
-        }
-    }
-
-    fn len(&self) -> usize {
-        match self {
-            Column::U8(v) => v.len(),
-            Column::U16(v) => v.len(),
-            Column::F32(v) => v.len(),
-            Column::I32(v) => v.len(),
-        }
-    }
-
-    /// Re-encodes every stored value at width `w` (exact: widening only); the widest encoding
-    /// is `i32` for an integer tensor, `f32` for a float one.
-    fn widen(&mut self, w: u8, integer: bool) {
-        if w <= self.width() {
-            return;
-        }
-        let old: Vec<i32> = match self {
-            Column::U8(v) => v.iter().map(|x| i32::from(*x)).collect(),
-            Column::U16(v) => v.iter().map(|x| i32::from(*x)).collect(),
-            // Already the widest encoding (`w > width` excludes it).
-            Column::F32(_) | Column::I32(_) => return,
-        };
-        *self = match (w, integer) {
-            (1, _) => Column::U16(old.iter().map(|x| *x as u16).collect()),
-            (_, true) => Column::I32(old),
-            (_, false) => Column::F32(old.iter().map(|x| *x as f32).collect()),
-        };
-    }
-
-    /// Grows storage to `n` values (zero-filled), reserving in steps of a quarter of the current
-    /// size so that amortised growth wastes at most ~25% (not the 100% of `Vec` doubling).
-    fn grow_to(&mut self, n: usize) {
-        fn grow<T: Clone + Default>(v: &mut Vec<T>, n: usize) {
-            if n > v.capacity() {
-                v.reserve_exact((n - v.len()).max(v.len() / 4));
-            }
-            v.resize(n, T::default());
-        }
-        if n <= self.len() {
-            return;
-        }
-        match self {
-            Column::U8(v) => grow(v, n),
-            Column::U16(v) => grow(v, n),
-            Column::F32(v) => grow(v, n),
-            Column::I32(v) => grow(v, n),
-        }
-    }
-
-    fn write(&mut self, at: usize, src: Values<'_>) {
-        match src {
-            Values::Floats(src) => {
-                self.widen(src.iter().map(|v| width_of(*v)).max().unwrap_or(0), false);
-                if !self.write_narrow(at, src)
-                    && let Column::F32(v) = self
-                {
-                    v[at..at + src.len()].copy_from_slice(src);
-                }
-            }
-            Values::Ints(src) => {
-                self.widen(
-                    src.iter().map(|v| int_width_of(*v)).max().unwrap_or(0),
-                    true,
-                );
-                if !self.write_narrow(at, src)
-                    && let Column::I32(v) = self
-                {
-                    v[at..at + src.len()].copy_from_slice(src);
-                }
-            }
-        }
-    }
-
-    /// Writes `src` if the column is `u8` or `u16` (the caller widened it so that every value
-    /// fits); `false` for the widest encodings, which the caller writes itself.
-    fn write_narrow<T: Narrow>(&mut self, at: usize, src: &[T]) -> bool {
-        match self {
-            Column::U8(v) => v[at..at + src.len()]
-                .iter_mut()
-                .zip(src)
-                .for_each(|(d, s)| *d = s.to_u8()),
-            Column::U16(v) => v[at..at + src.len()]
-                .iter_mut()
-                .zip(src)
-                .for_each(|(d, s)| *d = s.to_u16()),
-            Column::F32(_) | Column::I32(_) => return false,
-        }
-        true
-    }
-
-    fn read_floats(&self, at: usize, dst: &mut [f32]) {
-        let n = dst.len();
-        match self {
-            Column::U8(v) => dst
-                .iter_mut()
-                .zip(&v[at..at + n])
-                .for_each(|(d, s)| *d = f32::from(*s)),
-            Column::U16(v) => dst
-                .iter_mut()
-                .zip(&v[at..at + n])
-                .for_each(|(d, s)| *d = f32::from(*s)),
-            Column::F32(v) => dst.copy_from_slice(&v[at..at + n]),
-            Column::I32(_) => {}
-        }
-    }
-
-    fn read_ints(&self, at: usize, dst: &mut [i32]) {
-        let n = dst.len();
-        match self {
-            Column::U8(v) => dst
-                .iter_mut()
-                .zip(&v[at..at + n])
-                .for_each(|(d, s)| *d = i32::from(*s)),
-            Column::U16(v) => dst
-                .iter_mut()
-                .zip(&v[at..at + n])
-                .for_each(|(d, s)| *d = i32::from(*s)),
-            Column::I32(v) => dst.copy_from_slice(&v[at..at + n]),
-            Column::F32(_) => {}
-        }
-    }
-
-    /// Whether the stored values equal `src` exactly (floats bit for bit).
-    fn equals(&self, at: usize, src: Values<'_>) -> bool {
-        fn same<S: Copy, T: Copy>(a: &[S], b: &[T], eq: impl Fn(S, T) -> bool) -> bool {
-            a.iter().zip(b).all(|(x, y)| eq(*x, *y))
-        }
-        match src {
-            Values::Floats(src) => {
-                let n = src.len();
-                match self {
-                    Column::U8(v) => same(&v[at..at + n], src, |s, x| {
-                        f32::from(s).to_bits() == x.to_bits()
-                    }),
-                    Column::U16(v) => same(&v[at..at + n], src, |s, x| {
-                        f32::from(s).to_bits() == x.to_bits()
-                    }),
-                    Column::F32(v) => same(&v[at..at + n], src, |s, x| s.to_bits() == x.to_bits()),
-                    Column::I32(_) => false,
-                }
-            }
-            Values::Ints(src) => {
-                let n = src.len();
-                match self {
-                    Column::U8(v) => same(&v[at..at + n], src, |s, x| i32::from(s) == x),
-                    Column::U16(v) => same(&v[at..at + n], src, |s, x| i32::from(s) == x),
-                    Column::I32(v) => same(&v[at..at + n], src, |s, x| s == x),
-                    Column::F32(_) => false,
-                }
-            }
-        }
-    }
-
-    fn bytes(&self) -> usize {
-        match self {
-            Column::U8(v) => v.capacity(),
-            Column::U16(v) => v.capacity() * 2,
-            Column::F32(v) => v.capacity() * 4,
-            Column::I32(v) => v.capacity() * 4,
-        }
-    }
-}
-
-/// Row `row` of tensor `i` of `batch`, in the batch's kind of values.
-fn values_of(batch: &ObsBatch, i: usize, row: usize) -> Values<'_> {
-    if batch.is_integer(i) {
-        Values::Ints(batch.int_row(i, row))
-    } else {
-        Values::Floats(batch.tensor_row(i, row))
-    }
-}
-
-/// Reference-counted observation slots.
-#[derive(Clone, Debug)]
-struct ObsStore {
-    dims: Vec<usize>,
-    /// Per tensor: whether it holds integers (its column widens to `i32`, not `f32`).
-    integer: Vec<bool>,
-    columns: Vec<Column>,
-    /// Action masks, one bit per action, `words` u64 per slot.
-    mask: Vec<u64>,
-    words: usize,
-    refs: Vec<u32>,
-    free: Vec<usize>,
-}
-
-impl ObsStore {
-    fn new(layout: &ObsLayout) -> Self {
-        let dims: Vec<usize> = (0..layout.tensors.len()).map(|i| layout.dim(i)).collect();
-        let mask_width = layout.num_actions.unwrap_or(0);
-        Self {
-            columns: dims.iter().map(|_| Column::U8(Vec::new())).collect(),
-            integer: (0..dims.len()).map(|i| layout.is_integer(i)).collect(),
-            dims,
-            mask: Vec::new(),
-            words: mask_width.div_ceil(64),
-            refs: Vec::new(),
-            free: Vec::new(),
-        }
-    }
-
-    /// A slot holding row `row` of `src`, with one reference.
-    fn insert(&mut self, src: &ObsBatch, row: usize) -> usize {
-        let slot = match self.free.pop() {
-            Some(s) => s,
-            None => {
-                let s = self.refs.len();
-                self.refs.push(0);
-                for (c, d) in self.columns.iter_mut().zip(&self.dims) {
-                    c.grow_to((s + 1) * d);
-                }
-                if self.mask.len() < (s + 1) * self.words {
-                    if (s + 1) * self.words > self.mask.capacity() {
-                        self.mask.reserve_exact(self.words.max(self.mask.len() / 4));
-                    }
-                    self.mask.resize((s + 1) * self.words, 0);
-                }
-                s
-            }
-        };
-        self.refs[slot] = 1;
-        for (i, (c, d)) in self.columns.iter_mut().zip(&self.dims).enumerate() {
-            c.write(slot * d, values_of(src, i, row));
-        }
-        if let Some(m) = src.mask(row) {
-            let bits = &mut self.mask[slot * self.words..(slot + 1) * self.words];
-            bits.fill(0);
-            for (a, legal) in m.iter().enumerate() {
-                if *legal {
-                    bits[a / 64] |= 1 << (a % 64);
-                }
-            }
-        }
-        slot
-    }
-
-    fn equals(&self, slot: usize, src: &ObsBatch, row: usize) -> bool {
-        let tensors_equal = self
-            .columns
-            .iter()
-            .zip(&self.dims)
-            .enumerate()
-            .all(|(i, (c, d))| c.equals(slot * d, values_of(src, i, row)));
-        tensors_equal
-            && src.mask(row).is_none_or(|m| {
-                let bits = &self.mask[slot * self.words..(slot + 1) * self.words];
-                m.iter()
-                    .enumerate()
-                    .all(|(a, legal)| (bits[a / 64] >> (a % 64)) & 1 == u64::from(*legal))
-            })
-    }
-
-    fn retain(&mut self, slot: usize) {
-        self.refs[slot] += 1;
-    }
-
-    fn release(&mut self, slot: usize) {
-        self.refs[slot] -= 1;
-        if self.refs[slot] == 0 {
-            self.free.push(slot);
-        }
-    }
-
-    /// Decodes `slot` into row `row` of `out`.
-    fn read(&self, slot: usize, out: &mut ObsBatch, row: usize) {
-        for (i, (c, d)) in self.columns.iter().zip(&self.dims).enumerate() {
-            if out.is_integer(i) {
-                c.read_ints(slot * d, out.int_row_mut(i, row));
-            } else {
-                c.read_floats(slot * d, out.row_mut(i, row));
-            }
-        }
-        if let Some(m) = out.mask_mut(row) {
-            let bits = &self.mask[slot * self.words..(slot + 1) * self.words];
-            for (a, legal) in m.iter_mut().enumerate() {
-                *legal = (bits[a / 64] >> (a % 64)) & 1 == 1;
-            }
-        }
-    }
-
-    fn bytes(&self) -> usize {
-        self.columns.iter().map(Column::bytes).sum::<usize>()
-            + self.mask.capacity() * 8
-            + self.refs.capacity() * 4
-            + self.free.capacity() * std::mem::size_of::<usize>()
-    }
-}
+use crate::obs_store::ObsStore;
 
 /// Uniform replay of `(obs, action, reward, next_obs, terminated)`.
 ///
@@ -490,7 +128,7 @@ impl ReplayBuffer {
     /// Distinct observations currently stored (at most `2 × len()`, about `len()` for long
     /// episodes).
     pub fn stored_observations(&self) -> usize {
-        self.store.refs.len() - self.store.free.len()
+        self.store.live()
     }
 
     /// Bytes reserved for observations (tensor columns, mask bits and slot bookkeeping).
@@ -554,33 +192,7 @@ impl ReplayBuffer {
         w.usize(self.act_dim);
         w.usize(self.pos);
         w.usize(self.size);
-        let st = &self.store;
-        w.usizes(&st.dims);
-        w.usize(st.words);
-        for c in &st.columns {
-            match c {
-                Column::U8(v) => {
-                    w.u32(0);
-                    w.u8s(v);
-                }
-                Column::U16(v) => {
-                    w.u32(1);
-                    w.u16s(v);
-                }
-                Column::F32(v) => {
-                    w.u32(2);
-                    w.f32s(v);
-                }
-                Column::I32(v) => {
-                    w.u32(3);
-                    w.u32s(&v.iter().map(|x| *x as u32).collect::<Vec<u32>>());
-                }
-            }
-        }
-        w.u64s(&st.mask);
-        let refs: Vec<u32> = st.refs.clone();
-        w.u32s(&refs);
-        w.usizes(&st.free);
+        self.store.save(w);
         let n = self.size;
         w.usizes(&self.obs_slot[..n]);
         w.usizes(&self.next_slot[..n]);
@@ -614,47 +226,8 @@ impl ReplayBuffer {
         if pos >= capacity || size > capacity {
             return Err(resume_err("replay buffer: position out of range"));
         }
-        let dims = r.usizes()?;
-        let words = r.usize()?;
-        if dims != self.store.dims || words != self.store.words {
-            return Err(resume_err(
-                "replay buffer: the saved observations have another layout",
-            ));
-        }
-        let mut columns = Vec::with_capacity(dims.len());
-        for &integer in &self.store.integer {
-            let column = match r.u32()? {
-                0 => Column::U8(r.u8s()?),
-                1 => Column::U16(r.u16s()?),
-                2 => Column::F32(r.f32s()?),
-                3 => Column::I32(r.u32s()?.into_iter().map(|x| x as i32).collect()),
-                t => {
-                    return Err(resume_err(format!(
-                        "replay buffer: unknown column type {t}"
-                    )));
-                }
-            };
-            let kind_fits = match column {
-                Column::F32(_) => !integer,
-                Column::I32(_) => integer,
-                _ => true,
-            };
-            if !kind_fits {
-                return Err(resume_err(
-                    "replay buffer: a saved tensor is float where the layout has integers, or \
-                     the other way round",
-                ));
-            }
-            columns.push(column);
-        }
-        let mask = r.u64s()?;
-        let refs = r.u32s()?;
-        let free = r.usizes()?;
-        let slots = refs.len();
-        let columns_fit = columns.iter().zip(&dims).all(|(c, d)| c.len() == slots * d);
-        if !columns_fit || mask.len() != slots * words || free.iter().any(|f| *f >= slots) {
-            return Err(resume_err("replay buffer: inconsistent observation store"));
-        }
+        let store = self.store.load(r)?;
+        let slots = store.slots();
         let obs_slot = r.usizes()?;
         let next_slot = r.usizes()?;
         let act_d = r.usizes()?;
@@ -684,10 +257,7 @@ impl ReplayBuffer {
             }
             last_next.push(some.then_some(slot));
         }
-        self.store.columns = columns;
-        self.store.mask = mask;
-        self.store.refs = refs;
-        self.store.free = free;
+        self.store = store;
         self.obs_slot[..size].copy_from_slice(&obs_slot);
         self.next_slot[..size].copy_from_slice(&next_slot);
         self.act_d[..size].copy_from_slice(&act_d);
@@ -739,8 +309,10 @@ mod tests {
                 ("ids".into(), vec![3]),
                 ("x".into(), vec![2]),
                 ("tok".into(), vec![2]),
+                ("stat".into(), vec![3]),
+                ("late".into(), vec![2]),
             ],
-            dtypes: vec![DType::F32, DType::F32, DType::I32],
+            dtypes: vec![DType::F32, DType::F32, DType::I32, DType::F32, DType::I32],
             num_actions: Some(70),
         }
     }
@@ -778,6 +350,15 @@ mod tests {
                             t as i32 * 300
                         },
                     ],
+                ),
+                // Never changes (stored once); -0.0 and 0.0 must stay apart.
+                Tensor::new("stat", &[3], vec![-0.0, 0.0, 2.5]),
+                // The same until step 15, then different at every step (stored per slot
+                // from then on).
+                Tensor::new(
+                    "late",
+                    &[2],
+                    vec![7, if t >= 15 { 1000 + t as i32 } else { 9 }],
                 ),
             ],
             action_mask: Some(
@@ -832,7 +413,7 @@ mod tests {
             let (o, n) = pushed[step as usize - 1];
             want.write_row(0, &obs(o)).unwrap();
             want.write_row(1, &obs(n)).unwrap();
-            for ti in 0..3 {
+            for ti in 0..5 {
                 assert_eq!(row_bits(&sample.obs, ti, k), row_bits(&want, ti, 0));
                 assert_eq!(row_bits(&sample.next, ti, k), row_bits(&want, ti, 1));
             }
@@ -883,7 +464,7 @@ mod tests {
         rb.sample(40, &mut RngStream::new(1, "s"), &mut idx, &mut s1);
         back.sample(40, &mut RngStream::new(1, "s"), &mut idx, &mut s2);
         for k in 0..40 {
-            for t in 0..3 {
+            for t in 0..5 {
                 assert_eq!(row_bits(&s1.obs, t, k), row_bits(&s2.obs, t, k));
                 assert_eq!(row_bits(&s1.next, t, k), row_bits(&s2.next, t, k));
             }
@@ -897,6 +478,73 @@ mod tests {
         let mut r = crate::resume::StateReader::new(&bytes, "test", 1).unwrap();
         let err = other.load(&mut r).unwrap_err().to_string();
         assert!(err.contains("capacity 9"), "{err}");
+    }
+
+    /// A tensor that never changes costs its size once, not once per transition; the first
+    /// different value makes it per-slot, and every sample stays exact.
+    #[test]
+    fn unchanging_tensors_are_stored_once() {
+        let l = ObsLayout::floats(
+            vec![("adj".into(), vec![1000]), ("x".into(), vec![1])],
+            None,
+        );
+        let o = |t: usize, adj: f32| Observation {
+            tensors: vec![
+                Tensor::new("adj", &[1000], vec![adj; 1000]),
+                Tensor::new("x", &[1], vec![t as f32 * 0.1]),
+            ],
+            action_mask: None,
+        };
+        let mut rb = ReplayBuffer::new(&l, 200, 0);
+        let mut cur = ObsBatch::new(&l);
+        cur.push(&o(0, 0.5)).unwrap();
+        for t in 1..=100 {
+            rb.push(0, &cur, 0, &o(t, 0.5), t, &[], 0.0, false).unwrap();
+            cur.write_row(0, &o(t, 0.5)).unwrap();
+        }
+        // 101 observations: one shared row of 1,000 floats, one float each, bookkeeping.
+        let shared = rb.observation_bytes();
+        assert!(shared < 4 * 1000 + 101 * 64, "{shared} bytes");
+        rb.push(0, &cur, 0, &o(101, 0.25), 101, &[], 0.0, false)
+            .unwrap();
+        // Per slot from now on: 102 slots of 1,000 floats.
+        assert!(rb.observation_bytes() >= 102 * 4000);
+        let mut sample = ReplaySample::new(&l);
+        let mut idx = Vec::new();
+        rb.sample(300, &mut RngStream::new(0, "s"), &mut idx, &mut sample);
+        for (k, &i) in idx.iter().enumerate() {
+            let t = rb.act_d[i];
+            let next_adj = if t == 101 { 0.25 } else { 0.5 };
+            assert!(sample.obs.tensor_row(0, k).iter().all(|v| *v == 0.5));
+            assert!(sample.next.tensor_row(0, k).iter().all(|v| *v == next_adj));
+            assert_eq!(sample.obs.tensor_row(1, k), &[(t - 1) as f32 * 0.1]);
+            assert_eq!(sample.next.tensor_row(1, k), &[t as f32 * 0.1]);
+        }
+    }
+
+    /// A buffer saved before anything was pushed loads, and then fills as a new one does.
+    #[test]
+    fn an_empty_buffer_saves_and_loads() {
+        let l = layout();
+        let rb = ReplayBuffer::new(&l, 5, 0);
+        let mut w = crate::resume::StateWriter::new("test", 1);
+        rb.save(&mut w);
+        let bytes = w.finish();
+        let mut back = ReplayBuffer::new(&l, 5, 0);
+        let mut r = crate::resume::StateReader::new(&bytes, "test", 1).unwrap();
+        back.load(&mut r).unwrap();
+        r.finish().unwrap();
+        assert!(back.is_empty());
+        let mut cur = ObsBatch::new(&l);
+        cur.push(&obs(1)).unwrap();
+        back.push(0, &cur, 0, &obs(2), 0, &[], 0.0, false).unwrap();
+        let mut sample = ReplaySample::new(&l);
+        back.sample(1, &mut RngStream::new(0, "e"), &mut Vec::new(), &mut sample);
+        let mut want = ObsBatch::new(&l);
+        want.push(&obs(2)).unwrap();
+        for t in 0..5 {
+            assert_eq!(row_bits(&sample.next, t, 0), row_bits(&want, t, 0));
+        }
     }
 
     #[test]
