@@ -37,9 +37,21 @@ pub struct TrainArgs {
     /// their last interval checkpoint). Exit code 75 either way.
     #[arg(long, value_name = "SECONDS", default_value_t = 30.0)]
     pub preempt_grace: f64,
+    /// Train each run in a process of its own (a child of this one), so that its RAM, energy
+    /// and time are its alone: not shared with the runs beside it (`--jobs`) nor inflated by
+    /// what earlier runs left in the process. Training is the same either way.
+    #[arg(long)]
+    pub isolate: bool,
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// The child side of `--isolate`: train only the run in this directory (one of the
+    /// configs' runs) ...
+    #[arg(long, hide = true, value_name = "DIR", requires = "report_to")]
+    pub run_dir: Option<PathBuf>,
+    /// ... and write what happened to it (JSON) to this file.
+    #[arg(long, hide = true, value_name = "FILE", requires = "run_dir")]
+    pub report_to: Option<PathBuf>,
 }
 
 /// Arguments of `a2perf infer`.
@@ -134,6 +146,12 @@ pub struct RunArgs {
     /// experiment directory).
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
+    /// Train, infer and generalize each run in processes of its own (children of this one), so
+    /// that its RAM, energy and time are its alone: not shared with the runs beside it
+    /// (`--jobs`) nor inflated by what earlier runs left in the process. Results are the same
+    /// either way.
+    #[arg(long)]
+    pub isolate: bool,
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
@@ -190,6 +208,13 @@ pub const EXIT_LOCKED: i32 = 73;
 /// next safe point and stop, and the process exits with [`EXIT_INTERRUPTED`] — at the latest
 /// `grace` after the signal. A second SIGINT exits at once with 130, a second SIGTERM with 143.
 fn cancel_on_signals(grace: f64) -> Result<CancelToken> {
+    cancel_on_signals_with(grace, true)
+}
+
+/// [`cancel_on_signals`]; with `repeat_exits` false a second SIGTERM does not exit at once. The
+/// child process of `--isolate` runs so: its parent forwards the first SIGTERM it receives, and
+/// `pkill a2perf` reaches the child directly as well.
+fn cancel_on_signals_with(grace: f64, repeat_exits: bool) -> Result<CancelToken> {
     if !(grace.is_finite() && grace >= 0.0) {
         anyhow::bail!("--preempt-grace must be a non-negative number of seconds, got {grace}");
     }
@@ -211,6 +236,9 @@ fn cancel_on_signals(grace: f64) -> Result<CancelToken> {
                     "SIGINT"
                 };
                 if t.is_cancelled() {
+                    if !repeat_exits && signal == SIGTERM {
+                        continue;
+                    }
                     eprintln!("\n{name} again: exiting now");
                     std::process::exit(128 + signal);
                 }
@@ -233,6 +261,52 @@ fn cancel_on_signals(grace: f64) -> Result<CancelToken> {
         });
     }
     Ok(token)
+}
+
+/// How runs execute: in this process, or (`--isolate`) each in child processes that run this
+/// program again: `train` with the same configs, overrides and seeds for one run directory,
+/// `infer` and `generalize` on it.
+fn isolation(
+    isolate: bool,
+    configs: &[PathBuf],
+    set: &[String],
+    seeds: Option<&str>,
+    grace: f64,
+) -> Result<pipeline::isolate::Isolation> {
+    use pipeline::isolate::{ChildTask, Isolation};
+    if !isolate {
+        return Ok(Isolation::InProcess);
+    }
+    let exe = std::env::current_exe().context("--isolate: finding this program to run it again")?;
+    let (configs, set, seeds) = (configs.to_vec(), set.to_vec(), seeds.map(String::from));
+    Ok(Isolation::Children(std::sync::Arc::new(move |task| {
+        let mut c = std::process::Command::new(&exe);
+        match task {
+            ChildTask::Train { run, report } => {
+                c.arg("train").args(&configs);
+                for s in &set {
+                    c.arg("--set").arg(s);
+                }
+                if let Some(s) = &seeds {
+                    c.arg("--seeds").arg(s);
+                }
+                c.arg("--quiet")
+                    .arg("--preempt-grace")
+                    .arg(grace.to_string())
+                    .arg("--run-dir")
+                    .arg(run)
+                    .arg("--report-to")
+                    .arg(report);
+            }
+            ChildTask::Infer { run } => {
+                c.arg("infer").arg(run).arg("--quiet");
+            }
+            ChildTask::Generalize { run } => {
+                c.arg("generalize").arg(run).arg("--quiet");
+            }
+        }
+        c
+    })))
 }
 
 fn expand_runs(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
@@ -261,6 +335,7 @@ fn train_plans(
     jobs: usize,
     quiet: bool,
     cancel: &CancelToken,
+    isolation: pipeline::isolate::Isolation,
 ) -> Result<()> {
     let grid = pipeline::grid(plans, shard);
     let opts = TrainOptions {
@@ -268,6 +343,7 @@ fn train_plans(
         cancel: cancel.clone(),
         meters: pipeline::meters::system_meters(),
         show_progress: !quiet,
+        isolation,
     };
     let summary = pipeline::train(registry, &grid, &opts)?;
     print_train_summary(&summary);
@@ -302,8 +378,28 @@ fn print_train_summary(summary: &pipeline::TrainSummary) {
 /// `a2perf train`.
 pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
     let loaded = load(registry, &args.configs, &args.set, args.seeds.as_deref())?;
+    if let (Some(run), Some(report_to)) = (&args.run_dir, &args.report_to) {
+        // The child side of `--isolate`: one run, in this process.
+        let opts = TrainOptions {
+            cancel: cancel_on_signals_with(args.preempt_grace, false)?,
+            meters: pipeline::meters::system_meters(),
+            ..TrainOptions::default()
+        };
+        let report = pipeline::run::train_run_at(registry, &loaded.plans, run, &opts)?;
+        let json = serde_json::to_vec(&report)?;
+        std::fs::write(report_to, json)
+            .with_context(|| format!("writing {}", report_to.display()))?;
+        return Ok(());
+    }
     let shard = args.shard.as_deref().map(str::parse).transpose()?;
     let cancel = cancel_on_signals(args.preempt_grace)?;
+    let isolation = isolation(
+        args.isolate,
+        &args.configs,
+        &args.set,
+        args.seeds.as_deref(),
+        args.preempt_grace,
+    )?;
     if let Some(plan) = loaded.plans.iter().find(|p| p.dataset_from.is_some()) {
         // A suite's dataset step needs its source runs trained first, which one shard of a
         // sweep cannot know.
@@ -321,6 +417,7 @@ pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
             cancel,
             meters: pipeline::meters::system_meters(),
             show_progress: !args.quiet,
+            isolation,
         };
         pipeline::run::train_with_datasets(
             registry,
@@ -341,6 +438,7 @@ pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
         args.jobs,
         args.quiet,
         &cancel,
+        isolation,
     )
 }
 
@@ -520,6 +618,13 @@ pub fn run(registry: &Registry, args: &RunArgs) -> Result<()> {
         meters: pipeline::meters::system_meters(),
         show_progress: !args.quiet,
         report_dir: args.output.clone().or(loaded.report_dir),
+        isolation: isolation(
+            args.isolate,
+            &args.configs,
+            &args.set,
+            args.seeds.as_deref(),
+            args.preempt_grace,
+        )?,
     };
     pipeline::run_experiments(registry, &loaded.plans, &opts, &mut |event| match event {
         pipeline::RunEvent::Phase(name) => eprintln!("== {name}"),

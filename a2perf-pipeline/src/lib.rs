@@ -70,6 +70,7 @@ pub mod collect;
 pub mod external;
 pub mod generalize;
 pub mod infer;
+pub mod isolate;
 pub mod meters;
 pub mod minari;
 pub mod plan;

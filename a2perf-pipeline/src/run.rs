@@ -4,8 +4,9 @@ use std::path::{Path, PathBuf};
 
 use a2perf_core::{CancelToken, Registry};
 
+use crate::isolate::{ChildTask, Isolation};
 use crate::report::{Report, ReportOptions};
-use crate::train::{MeterFactory, TrainOptions, TrainSummary, no_meters};
+use crate::train::{MeterFactory, RunReport, TrainOptions, TrainSummary, no_meters};
 use crate::{
     ExperimentPlan, GENERALIZATION_FILE, GeneralizationResults, INFERENCE_FILE, InferOptions,
     InferenceResults, LoadedRun, MetricSettings, PipelineError, Result,
@@ -24,6 +25,9 @@ pub struct RunOptions {
     pub show_progress: bool,
     /// Report directory (default: `report/` in the first experiment directory).
     pub report_dir: Option<PathBuf>,
+    /// Where each run trains, infers and generalizes: in this process, or in child processes of
+    /// its own ([`Isolation::Children`]: its system figures are then its alone).
+    pub isolation: Isolation,
 }
 
 impl Default for RunOptions {
@@ -34,6 +38,7 @@ impl Default for RunOptions {
             meters: no_meters(),
             show_progress: false,
             report_dir: None,
+            isolation: Isolation::InProcess,
         }
     }
 }
@@ -119,7 +124,6 @@ pub fn collect_dataset(
     let Some(source) = plan.dataset_from.clone() else {
         return Ok(());
     };
-    let samples = source.samples.to_string_lossy().into_owned();
     let complete = plan.seeds.iter().all(|s| {
         a2perf_core::RunDir::new(plan.run_dir(*s))
             .is_complete()
@@ -147,9 +151,53 @@ pub fn collect_dataset(
             )));
         }
     }
-    plan.dataset = crate::collect::dataset_info_for(&source.samples)?
-        .map(|info| crate::DatasetProvenance::from_info(&info, &samples));
+    attach_dataset(plan)
+}
+
+/// Records in `plan` the provenance of the dataset its suite collected for it (nothing for a
+/// plan without a suite dataset step).
+fn attach_dataset(plan: &mut ExperimentPlan) -> Result<()> {
+    if let Some(source) = &plan.dataset_from {
+        let samples = source.samples.to_string_lossy().into_owned();
+        plan.dataset = crate::collect::dataset_info_for(&source.samples)?
+            .map(|info| crate::DatasetProvenance::from_info(&info, &samples));
+    }
     Ok(())
+}
+
+/// Trains the one run of `plans` whose directory is `run`, in this process: the child side of
+/// [`Isolation::Children`]. The child builds `plans` from the same configs as its parent, so the
+/// run is the one the parent would have trained; a run whose suite collects its dataset gets
+/// that dataset's provenance, as [`collect_dataset`] gives it in the parent.
+pub fn train_run_at(
+    registry: &Registry,
+    plans: &[ExperimentPlan],
+    run: &Path,
+    opts: &TrainOptions,
+) -> Result<RunReport> {
+    let (plan, seed) = plans
+        .iter()
+        .find_map(|p| {
+            p.seeds
+                .iter()
+                .find(|s| p.run_dir(**s) == run)
+                .map(|s| (p, *s))
+        })
+        .ok_or_else(|| {
+            PipelineError::Invalid(format!(
+                "{}: no run of these configs has this directory",
+                run.display()
+            ))
+        })?;
+    let mut plan = plan.clone();
+    attach_dataset(&mut plan)?;
+    crate::train::preflight(registry, &crate::grid(std::slice::from_ref(&plan), None))?;
+    let job = crate::RunJob {
+        index: 0,
+        plan,
+        seed,
+    };
+    crate::train::train_run(registry, &job, opts)
 }
 
 /// Trains every run of `plans`, an experiment whose dataset the suite collects from other
@@ -212,6 +260,7 @@ pub fn run_experiments(
         cancel: cancel.clone(),
         meters: opts.meters.clone(),
         show_progress: opts.show_progress,
+        isolation: opts.isolation.clone(),
     };
     train_with_datasets(registry, plans, &train_opts, on_event)?;
 
@@ -235,7 +284,13 @@ pub fn run_experiments(
         if dir.join(INFERENCE_FILE).is_file() {
             continue;
         }
-        let r = crate::infer_run(registry, dir, &infer_opts)?;
+        let r = match &opts.isolation {
+            Isolation::InProcess => crate::infer_run(registry, dir, &infer_opts)?,
+            Isolation::Children(command) => {
+                crate::isolate::phase_in_child(command, ChildTask::Infer { run: dir }, cancel)?;
+                read_result::<InferenceResults>(&dir.join(INFERENCE_FILE))?
+            }
+        };
         on_event(RunEvent::Inferred(dir, &r));
     }
 
@@ -247,7 +302,17 @@ pub fn run_experiments(
         if dir.join(GENERALIZATION_FILE).is_file() {
             continue;
         }
-        let r = crate::generalize_run(registry, dir, None, opts.show_progress)?;
+        let r = match &opts.isolation {
+            Isolation::InProcess => crate::generalize_run(registry, dir, None, opts.show_progress)?,
+            Isolation::Children(command) => {
+                crate::isolate::phase_in_child(
+                    command,
+                    ChildTask::Generalize { run: dir },
+                    cancel,
+                )?;
+                read_result::<GeneralizationResults>(&dir.join(GENERALIZATION_FILE))?
+            }
+        };
         on_event(RunEvent::Generalized(dir, &r));
     }
 
@@ -263,4 +328,16 @@ pub fn run_experiments(
     let report = crate::report::write_report(&experiments, &out, &report_opts)?;
     on_event(RunEvent::Reported(&out, &report));
     Ok(out)
+}
+
+/// A results file a child process wrote.
+fn read_result<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let bytes = std::fs::read(path).map_err(|e| {
+        PipelineError::Invalid(format!(
+            "{}: not written by its process: {e}",
+            path.display()
+        ))
+    })?;
+    serde_json::from_slice(&bytes)
+        .map_err(|e| PipelineError::Invalid(format!("{}: {e}", path.display())))
 }

@@ -19,6 +19,7 @@ use a2perf_core::{
 };
 use serde::{Deserialize, Serialize};
 
+use super::isolate::Isolation;
 use super::plan::{ExperimentPlan, MetricSettings, RunJob};
 use super::run_lock::{LockHolder, LockedRun, TRAIN_LOCK_FILE, TrainingLock};
 use super::{
@@ -60,6 +61,9 @@ pub struct TrainOptions {
     pub meters: MeterFactory,
     /// Show a progress bar.
     pub show_progress: bool,
+    /// Where each run trains: in this process, or in a child process of its own (whose meters
+    /// then measure that run alone).
+    pub isolation: Isolation,
 }
 
 impl Default for TrainOptions {
@@ -69,6 +73,7 @@ impl Default for TrainOptions {
             cancel: CancelToken::new(),
             meters: no_meters(),
             show_progress: false,
+            isolation: Isolation::InProcess,
         }
     }
 }
@@ -82,6 +87,10 @@ pub struct PhaseSystem {
     /// Most runs that shared this process while the phase ran. Meters measure the whole
     /// process, so with more than one the RAM and energy figures cover all of them.
     pub concurrent_runs: usize,
+    /// The process that measured the phase (absent in records written before it was kept, and
+    /// for segments of several processes combined).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pid: Option<u32>,
     /// What the meters reported.
     pub meters: MeterReport,
     /// Meters that failed, and why (their values are then missing, never zero).
@@ -104,7 +113,7 @@ fn is_one(n: &usize) -> bool {
 }
 
 /// What happened to one run.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum RunOutcome {
     /// Trained to completion now (possibly continuing an interrupted run).
     Completed,
@@ -185,6 +194,7 @@ pub struct TrainSegments {
 /// let seg = |secs: f64, kwh: f64, peak: f64, mean: f64| PhaseSystem {
 ///     wall_clock_s: secs,
 ///     concurrent_runs: 1,
+///     pid: None,
 ///     meters: MeterReport { measurements: vec![
 ///         Measurement::measured("energy_kwh", kwh, "kWh"),
 ///         Measurement::measured("peak_ram_gb", peak, "GB"),
@@ -296,6 +306,10 @@ pub fn combine_segments(parts: &[PhaseSystem], killed: usize) -> PhaseSystem {
     PhaseSystem {
         wall_clock_s: wall,
         concurrent_runs: parts.iter().map(|p| p.concurrent_runs).max().unwrap_or(1),
+        pid: parts
+            .first()
+            .and_then(|p| p.pid)
+            .filter(|pid| parts.iter().all(|p| p.pid == Some(*pid))),
         meters: MeterReport { measurements },
         meter_errors: parts
             .iter()
@@ -433,6 +447,7 @@ impl MeteredPhase {
         PhaseSystem {
             wall_clock_s: wall,
             concurrent_runs: self.active.observe(),
+            pid: Some(std::process::id()),
             meters,
             meter_errors: self.errors,
             segments: 1,
@@ -512,7 +527,14 @@ pub fn train(registry: &Registry, jobs: &[RunJob], opts: &TrainOptions) -> Resul
                             .map(|n| n.to_string_lossy().into_owned())
                             .unwrap_or_default(),
                     );
-                    let r = train_run(registry, job, opts);
+                    let r = match &opts.isolation {
+                        Isolation::InProcess => train_run(registry, job, opts),
+                        Isolation::Children(command) => crate::isolate::train_in_child(
+                            command,
+                            &job.plan.run_dir(job.seed),
+                            &opts.cancel,
+                        ),
+                    };
                     bar.inc(1);
                     if let Ok(mut slots) = results.lock() {
                         slots[i] = Some(r);
@@ -546,8 +568,9 @@ pub fn train(registry: &Registry, jobs: &[RunJob], opts: &TrainOptions) -> Resul
     Ok(summary)
 }
 
-/// What [`train_run`] did to one run.
-#[derive(Clone, Debug, PartialEq)]
+/// What [`train_run`] did to one run (a child process of [`Isolation::Children`] hands it to
+/// its parent as JSON).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunReport {
     /// How the run ended.
     pub outcome: RunOutcome,

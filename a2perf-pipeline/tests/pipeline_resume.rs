@@ -134,6 +134,7 @@ fn train_interrupted(
             meters(phase, dir, settings)
         }),
         show_progress: false,
+        isolation: Default::default(),
     };
     let jobs = a2perf_pipeline::grid(std::slice::from_ref(plan), None);
     a2perf_pipeline::train(reg, &jobs, &opts).unwrap()

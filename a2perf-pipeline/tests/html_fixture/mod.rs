@@ -148,6 +148,7 @@ impl SynthRun {
         let system = |energy: f64, ram: f64, wall: f64, note: &str| PhaseSystem {
             wall_clock_s: wall,
             concurrent_runs: 1,
+            pid: None,
             meters: MeterReport {
                 measurements: vec![
                     Measurement {
