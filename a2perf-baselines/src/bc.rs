@@ -274,7 +274,7 @@ impl Algorithm for Bc {
             for (&t, stats) in norm.tensors.iter().zip(norm.stats.iter_mut()) {
                 let d = layout.dim(t);
                 let mut all = vec![0.0f32; n * d];
-                for (slot, dst) in all.chunks_exact_mut(d.max(1)).enumerate().take(n) {
+                for (slot, dst) in all.chunks_exact_mut(d.max(1)).enumerate() {
                     store.read_tensor(slot, t, &mut row, 0);
                     dst.copy_from_slice(row.tensor_row(t, 0));
                 }

@@ -43,6 +43,35 @@ pub enum ChildTask<'a> {
     },
 }
 
+impl ChildTask<'_> {
+    /// What the task is called in messages, and its run directory.
+    fn describe(&self) -> (&'static str, &Path) {
+        match *self {
+            ChildTask::Train { run, .. } => ("training", run),
+            ChildTask::Infer { run } => ("inference", run),
+            ChildTask::Generalize { run } => ("generalization", run),
+        }
+    }
+}
+
+/// Runs `task` in a child process with its standard output discarded (the parent prints the
+/// results); an error naming the run when the process cannot start.
+fn run_task(
+    command: &ChildCommand,
+    task: ChildTask<'_>,
+    cancel: &CancelToken,
+) -> Result<ExitStatus> {
+    let (what, dir) = task.describe();
+    let mut cmd = command(task);
+    cmd.stdout(Stdio::null());
+    run_child(cmd, cancel).map_err(|e| {
+        PipelineError::Invalid(format!(
+            "{}: cannot start the {what} process: {e}",
+            dir.display()
+        ))
+    })
+}
+
 /// Builds the command of a child process.
 pub type ChildCommand = Arc<dyn Fn(ChildTask<'_>) -> Command + Send + Sync>;
 
@@ -127,17 +156,11 @@ pub(crate) fn train_in_child(
         std::process::id(),
         NEXT.fetch_add(1, Ordering::Relaxed)
     ));
-    let mut cmd = command(ChildTask::Train {
+    let task = ChildTask::Train {
         run: dir,
         report: &report,
-    });
-    cmd.stdout(Stdio::null());
-    let status = run_child(cmd, cancel).map_err(|e| {
-        PipelineError::Invalid(format!(
-            "{}: cannot start the run's process: {e}",
-            dir.display()
-        ))
-    })?;
+    };
+    let status = run_task(command, task, cancel)?;
     let written = std::fs::read(&report);
     let _ = std::fs::remove_file(&report);
     match written
@@ -163,19 +186,8 @@ pub(crate) fn phase_in_child(
     task: ChildTask<'_>,
     cancel: &CancelToken,
 ) -> Result<()> {
-    let (what, dir) = match task {
-        ChildTask::Infer { run } => ("inference", run),
-        ChildTask::Generalize { run } => ("generalization", run),
-        ChildTask::Train { run, .. } => ("training", run),
-    };
-    let mut cmd = command(task);
-    cmd.stdout(Stdio::null());
-    let status = run_child(cmd, cancel).map_err(|e| {
-        PipelineError::Invalid(format!(
-            "{}: cannot start the {what} process: {e}",
-            dir.display()
-        ))
-    })?;
+    let (what, dir) = task.describe();
+    let status = run_task(command, task, cancel)?;
     if cancel.is_cancelled() {
         return Err(PipelineError::Cancelled);
     }
