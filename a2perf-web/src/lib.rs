@@ -11,7 +11,7 @@
 //! - [`Website`]: the element tree of a design with one episode's random content, rendered as real
 //!   HTML with a stylesheet that imposes a font-independent block layout;
 //! - [`DomState`]: the dynamic DOM, the simulated backend's action semantics and its layout;
-//! - [`ChromiumBackend`]: headless Chromium through chromedriver (W3C WebDriver over a hand-written
+//! - [`ChromiumBackend`]: headless Chromium through chromedriver (W3C WebDriver over a keep-alive
 //!   HTTP/1.1 client), pages served from an in-process 127.0.0.1 server, one round trip per step;
 //!   Debian's `chromium-headless-shell` when installed (a lone environment under 200 MiB, see
 //!   [`TreeMemory`] for how that is measured), else the full `chromium`;

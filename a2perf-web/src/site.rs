@@ -482,11 +482,9 @@ impl Builder<'_> {
         format!("${}", 1 + self.rng.below(50))
     }
 
-    /// Renders a passive primitive (or an active one; returns the field elements).
+    /// Renders a primitive; returns the elements of its profile field (none for a passive one).
     fn primitive(&mut self, prim: Primitive) -> Vec<u32> {
-        let p = self.page;
         let c = prim.info().concept;
-        let d = Behaviour::Distractor;
         let one = |i: u32| vec![i];
         match prim.name() {
             "addressline1" => one(self.text_input(c, Some("Address"), Tag::InputText, "")),
@@ -514,221 +512,431 @@ impl Builder<'_> {
             "cabin" => self.radios(c, "Cabin", &["Economy", "First"]),
             "cc" => self.radios(c, "Payment", &["Credit Card", "Debit Card"]),
             "flighttype" => self.radios(c, "", &["Oneway", "Roundtrip"]),
-            "state" => {
-                let g = self.open(Tag::Div, "form-group", "group_state");
-                let mut n = Node::new(Tag::Select, Block::Leaf(20));
-                n.classes = "custom-select d-block w-100".into();
-                n.html_id = "actionable_state".into();
-                n.behaviour = Behaviour::Actionable;
-                n.options = vec![self.intern("CA"), self.intern("NY")];
-                let i = self.push(n);
-                self.close(g);
-                vec![i]
-            }
-            "inpgroup1" => {
-                let g = self.open(Tag::Div, "input-group", &format!("group_inputgroup_p{p}"));
-                self.input(
-                    Tag::InputText,
-                    "Search",
-                    "form-control",
-                    &format!("actionable_inputgroup_p{p}"),
-                );
-                self.close(g);
+            "state" => vec![self.state_select()],
+            _ => {
+                self.passive(prim);
                 vec![]
             }
-            "forgotpassowrd" => {
-                self.link(c, "Forgot password.");
-                vec![]
-            }
-            "forgotusername" => {
-                self.link(c, "Forgot user name.");
-                vec![]
-            }
-            "header" => self.header("Shipping Information"),
-            "header_login" => self.header("Login"),
-            "header_select_items" => self.header("Select items"),
-            "navbar" => {
-                let nav = self.open(
-                    Tag::Nav,
-                    "navbar navbar-dark bg-dark",
-                    &format!("group_navbar_p{p}"),
-                );
-                self.leaf(
-                    Tag::A,
-                    "GShopping",
-                    "navbar-brand",
-                    &format!("actionable_navbar_p{p}_brand"),
-                    d,
-                );
-                let t = self.leaf(
-                    Tag::Button,
-                    "Menu",
-                    "navbar-toggler",
-                    &format!("actionable_navbar_p{p}_toggler"),
-                    Behaviour::Inert,
-                );
-                let menu = self.open(Tag::Div, "collapse navbar-collapse", "");
-                self.nodes[menu as usize].hidden = true;
-                self.nodes[t as usize].behaviour = Behaviour::Toggle(menu);
-                for (k, item) in ["Home", "Login", "Account", "Cart", "Checkout"]
-                    .iter()
-                    .enumerate()
-                {
-                    self.leaf(
-                        Tag::A,
-                        item,
-                        "nav-link",
-                        &format!("actionable_navbar_p{p}_i{k}"),
-                        d,
-                    );
-                }
-                self.close(menu);
-                self.close(nav);
-                vec![]
-            }
-            "carousel" => {
-                let active = self.rng.index(5);
-                let g = self.open(Tag::Div, "carousel slide", &format!("group_carousel_p{p}"));
-                let inner = self.open(Tag::Div, "carousel-inner", "");
-                for k in 0..5 {
-                    let cls = if k == active {
-                        "carousel-item active"
-                    } else {
-                        "carousel-item"
-                    };
-                    let i = self.leaf(
-                        Tag::Img,
-                        "",
-                        cls,
-                        &format!("actionable_carousel_p{p}_i{k}"),
-                        d,
-                    );
-                    self.nodes[i as usize].hidden = k != active;
-                }
-                self.close(inner);
-                self.leaf(
-                    Tag::A,
-                    "Previous",
-                    "carousel-control-prev",
-                    &format!("actionable_carousel_p{p}_i5"),
-                    d,
-                );
-                self.leaf(
-                    Tag::A,
-                    "Next",
-                    "carousel-control-next",
-                    &format!("actionable_carousel_p{p}_i6"),
-                    d,
-                );
-                self.close(g);
-                vec![]
-            }
-            "cart" => {
-                let g = self.open(Tag::Div, "card", &format!("group_cart_p{p}"));
-                self.leaf(Tag::H5, "Your cart", "card-header", "", Behaviour::Inert);
-                for (k, item) in ["Shoe", "Bag", "Tshirt"].iter().enumerate() {
-                    let row = self.open(Tag::Div, "list-group-item", "");
-                    self.leaf(Tag::Span, item, "", "", Behaviour::Inert);
-                    let price = self.price();
-                    self.leaf(Tag::Span, &price, "text-muted", "", Behaviour::Inert);
-                    self.leaf(
-                        Tag::A,
-                        "Remove",
-                        "remove",
-                        &format!("actionable_cart_p{p}_i{k}"),
-                        d,
-                    );
-                    self.close(row);
-                }
-                let ig = self.open(Tag::Div, "input-group", "");
-                self.input(
-                    Tag::InputText,
-                    "Promo code",
-                    "form-control",
-                    &format!("actionable_cart_p{p}_promo"),
-                );
-                self.leaf(
-                    Tag::Button,
-                    "Redeem",
-                    "btn btn-secondary",
-                    &format!("actionable_cart_p{p}_redeem"),
-                    d,
-                );
-                self.close(ig);
-                self.close(g);
-                vec![]
-            }
-            "dealmedia" => {
-                let g = self.open(Tag::Div, "media", &format!("group_dealmedia_p{p}"));
-                self.leaf(Tag::Img, "", "mr-3", "", Behaviour::Inert);
-                let body = self.open(Tag::Div, "media-body", "");
-                self.leaf(Tag::H5, "Deal of the Day", "mt-0", "", Behaviour::Inert);
-                self.leaf(Tag::P, "Gaming workstation", "", "", Behaviour::Inert);
-                self.leaf(
-                    Tag::A,
-                    "Get it today!",
-                    "",
-                    &format!("actionable_dealmedia_p{p}"),
-                    d,
-                );
-                self.close(body);
-                self.close(g);
-                vec![]
-            }
-            "deck" => {
-                let g = self.open(Tag::Div, "card-deck", &format!("group_deck_p{p}"));
-                for k in 0..4 {
-                    let card = self.open(Tag::Div, "card", "");
-                    self.leaf(
-                        Tag::Img,
-                        "",
-                        "card-img-top",
-                        &format!("actionable_deck_p{p}_img{k}"),
-                        d,
-                    );
-                    self.leaf(
-                        Tag::A,
-                        &format!("Title {}", k + 1),
-                        "card-title",
-                        &format!("actionable_deck_p{p}_i{k}"),
-                        d,
-                    );
-                    let price = self.price();
-                    self.leaf(Tag::P, &price, "card-text", "", Behaviour::Inert);
-                    let stars = format!("{} stars", 1 + self.rng.below(5));
-                    self.leaf(Tag::P, &stars, "text-muted", "", Behaviour::Inert);
-                    self.close(card);
-                }
-                self.close(g);
-                vec![]
-            }
-            "footer1" => {
-                let g = self.open(Tag::Footer, "footer", &format!("group_footer_p{p}"));
-                self.leaf(Tag::P, "2020-2021 The Company.", "", "", Behaviour::Inert);
-                for (k, l) in ["Contact", "Terms", "Support", "Full Site"]
-                    .iter()
-                    .enumerate()
-                {
-                    self.leaf(
-                        Tag::A,
-                        l,
-                        "footer-link",
-                        &format!("actionable_footer_p{p}_i{k}"),
-                        d,
-                    );
-                }
-                self.close(g);
-                vec![]
-            }
-            // next_* and submit are placed by `page`.
-            _ => vec![],
         }
     }
 
-    fn header(&mut self, text: &str) -> Vec<u32> {
-        self.leaf(Tag::H5, text, "mb-3", "group_header", Behaviour::Inert);
-        vec![]
+    /// Renders a passive primitive (one that holds no profile field).
+    fn passive(&mut self, prim: Primitive) {
+        let c = prim.info().concept;
+        match prim.name() {
+            "inpgroup1" => self.input_group(),
+            "forgotpassowrd" => self.link(c, "Forgot password."),
+            "forgotusername" => self.link(c, "Forgot user name."),
+            "header" => self.header("Shipping Information"),
+            "header_login" => self.header("Login"),
+            "header_select_items" => self.header("Select items"),
+            "navbar" => self.navbar(),
+            "carousel" => self.carousel(),
+            "cart" => self.cart(),
+            "dealmedia" => self.deal_media(),
+            "deck" => self.deck(),
+            "footer1" => self.footer(),
+            // next_* and submit are placed by `page`.
+            _ => {}
+        }
     }
+
+    /// The `state` select (CA/NY); returns the select.
+    fn state_select(&mut self) -> u32 {
+        let g = self.open(Tag::Div, "form-group", "group_state");
+        let mut n = Node::new(Tag::Select, Block::Leaf(20));
+        n.classes = "custom-select d-block w-100".into();
+        n.html_id = "actionable_state".into();
+        n.behaviour = Behaviour::Actionable;
+        n.options = vec![self.intern("CA"), self.intern("NY")];
+        let i = self.push(n);
+        self.close(g);
+        i
+    }
+
+    /// A search input group (`inpgroup1`; holds no field).
+    fn input_group(&mut self) {
+        let p = self.page;
+        let g = self.open(Tag::Div, "input-group", &format!("group_inputgroup_p{p}"));
+        self.input(
+            Tag::InputText,
+            "Search",
+            "form-control",
+            &format!("actionable_inputgroup_p{p}"),
+        );
+        self.close(g);
+    }
+
+    /// The navbar: a brand link and five menu links (distractors), and a toggler that shows the menu.
+    fn navbar(&mut self) {
+        let p = self.page;
+        let d = Behaviour::Distractor;
+        let nav = self.open(
+            Tag::Nav,
+            "navbar navbar-dark bg-dark",
+            &format!("group_navbar_p{p}"),
+        );
+        self.leaf(
+            Tag::A,
+            "GShopping",
+            "navbar-brand",
+            &format!("actionable_navbar_p{p}_brand"),
+            d,
+        );
+        let t = self.leaf(
+            Tag::Button,
+            "Menu",
+            "navbar-toggler",
+            &format!("actionable_navbar_p{p}_toggler"),
+            Behaviour::Inert,
+        );
+        let menu = self.open(Tag::Div, "collapse navbar-collapse", "");
+        self.nodes[menu as usize].hidden = true;
+        self.nodes[t as usize].behaviour = Behaviour::Toggle(menu);
+        for (k, item) in ["Home", "Login", "Account", "Cart", "Checkout"]
+            .iter()
+            .enumerate()
+        {
+            self.leaf(
+                Tag::A,
+                item,
+                "nav-link",
+                &format!("actionable_navbar_p{p}_i{k}"),
+                d,
+            );
+        }
+        self.close(menu);
+        self.close(nav);
+    }
+
+    /// A five-slide carousel showing a random slide, with previous/next links (all distractors).
+    fn carousel(&mut self) {
+        let p = self.page;
+        let d = Behaviour::Distractor;
+        let active = self.rng.index(5);
+        let g = self.open(Tag::Div, "carousel slide", &format!("group_carousel_p{p}"));
+        let inner = self.open(Tag::Div, "carousel-inner", "");
+        for k in 0..5 {
+            let cls = if k == active {
+                "carousel-item active"
+            } else {
+                "carousel-item"
+            };
+            let i = self.leaf(
+                Tag::Img,
+                "",
+                cls,
+                &format!("actionable_carousel_p{p}_i{k}"),
+                d,
+            );
+            self.nodes[i as usize].hidden = k != active;
+        }
+        self.close(inner);
+        self.leaf(
+            Tag::A,
+            "Previous",
+            "carousel-control-prev",
+            &format!("actionable_carousel_p{p}_i5"),
+            d,
+        );
+        self.leaf(
+            Tag::A,
+            "Next",
+            "carousel-control-next",
+            &format!("actionable_carousel_p{p}_i6"),
+            d,
+        );
+        self.close(g);
+    }
+
+    /// A cart of three items with random prices, remove links and a promo-code input group.
+    fn cart(&mut self) {
+        let p = self.page;
+        let d = Behaviour::Distractor;
+        let g = self.open(Tag::Div, "card", &format!("group_cart_p{p}"));
+        self.leaf(Tag::H5, "Your cart", "card-header", "", Behaviour::Inert);
+        for (k, item) in ["Shoe", "Bag", "Tshirt"].iter().enumerate() {
+            let row = self.open(Tag::Div, "list-group-item", "");
+            self.leaf(Tag::Span, item, "", "", Behaviour::Inert);
+            let price = self.price();
+            self.leaf(Tag::Span, &price, "text-muted", "", Behaviour::Inert);
+            self.leaf(
+                Tag::A,
+                "Remove",
+                "remove",
+                &format!("actionable_cart_p{p}_i{k}"),
+                d,
+            );
+            self.close(row);
+        }
+        let ig = self.open(Tag::Div, "input-group", "");
+        self.input(
+            Tag::InputText,
+            "Promo code",
+            "form-control",
+            &format!("actionable_cart_p{p}_promo"),
+        );
+        self.leaf(
+            Tag::Button,
+            "Redeem",
+            "btn btn-secondary",
+            &format!("actionable_cart_p{p}_redeem"),
+            d,
+        );
+        self.close(ig);
+        self.close(g);
+    }
+
+    /// The "Deal of the Day" media object.
+    fn deal_media(&mut self) {
+        let p = self.page;
+        let d = Behaviour::Distractor;
+        let g = self.open(Tag::Div, "media", &format!("group_dealmedia_p{p}"));
+        self.leaf(Tag::Img, "", "mr-3", "", Behaviour::Inert);
+        let body = self.open(Tag::Div, "media-body", "");
+        self.leaf(Tag::H5, "Deal of the Day", "mt-0", "", Behaviour::Inert);
+        self.leaf(Tag::P, "Gaming workstation", "", "", Behaviour::Inert);
+        self.leaf(
+            Tag::A,
+            "Get it today!",
+            "",
+            &format!("actionable_dealmedia_p{p}"),
+            d,
+        );
+        self.close(body);
+        self.close(g);
+    }
+
+    /// A deck of four cards with random prices and star ratings.
+    fn deck(&mut self) {
+        let p = self.page;
+        let d = Behaviour::Distractor;
+        let g = self.open(Tag::Div, "card-deck", &format!("group_deck_p{p}"));
+        for k in 0..4 {
+            let card = self.open(Tag::Div, "card", "");
+            self.leaf(
+                Tag::Img,
+                "",
+                "card-img-top",
+                &format!("actionable_deck_p{p}_img{k}"),
+                d,
+            );
+            self.leaf(
+                Tag::A,
+                &format!("Title {}", k + 1),
+                "card-title",
+                &format!("actionable_deck_p{p}_i{k}"),
+                d,
+            );
+            let price = self.price();
+            self.leaf(Tag::P, &price, "card-text", "", Behaviour::Inert);
+            let stars = format!("{} stars", 1 + self.rng.below(5));
+            self.leaf(Tag::P, &stars, "text-muted", "", Behaviour::Inert);
+            self.close(card);
+        }
+        self.close(g);
+    }
+
+    /// The footer with four links.
+    fn footer(&mut self) {
+        let p = self.page;
+        let d = Behaviour::Distractor;
+        let g = self.open(Tag::Footer, "footer", &format!("group_footer_p{p}"));
+        self.leaf(Tag::P, "2020-2021 The Company.", "", "", Behaviour::Inert);
+        for (k, l) in ["Contact", "Terms", "Support", "Full Site"]
+            .iter()
+            .enumerate()
+        {
+            self.leaf(
+                Tag::A,
+                l,
+                "footer-link",
+                &format!("actionable_footer_p{p}_i{k}"),
+                d,
+            );
+        }
+        self.close(g);
+    }
+
+    fn header(&mut self, text: &str) {
+        self.leaf(Tag::H5, text, "mb-3", "group_header", Behaviour::Inert);
+    }
+}
+
+impl Builder<'_> {
+    /// Renders page `p` (the last one when `last`) with its primitives `list`: the primitives
+    /// outside the form, then the form with the others and the page's next/submit button.
+    /// Active primitives join `placed`; returns the page's root element.
+    fn page(
+        &mut self,
+        p: usize,
+        last: bool,
+        list: &[Primitive],
+        placed: &mut Vec<(Primitive, Vec<u32>)>,
+    ) -> u32 {
+        self.page = p;
+        let page = self.open(Tag::Div, "page", &format!("page{p}"));
+        self.nodes[page as usize].hidden = p > 0;
+        for &prim in list.iter().filter(|q| !q.in_form()) {
+            self.primitive(prim);
+        }
+        let form = self.open(Tag::Div, "container", &format!("mainform_p{p}"));
+        let nav = if last {
+            list.iter().position(|q| q.name() == "submit")
+        } else {
+            list.iter().position(|q| is_next(*q))
+        };
+        for (k, &prim) in list.iter().enumerate().filter(|(_, q)| q.in_form()) {
+            if Some(k) == nav {
+                continue;
+            }
+            if is_next(prim) || prim.name() == "submit" {
+                let concept = prim.info().concept;
+                self.button(
+                    concept,
+                    button_text(prim),
+                    "btn btn-secondary btn-sm btn-block",
+                    Behaviour::Actionable,
+                );
+                continue;
+            }
+            let nodes = self.primitive(prim);
+            if prim.info().active {
+                self.place(prim, nodes, placed);
+            }
+        }
+        let (concept, text, beh) = match (last, nav) {
+            (true, Some(k)) => ("submit", button_text(list[k]), Behaviour::Submit),
+            (true, None) => ("submit", "Submit", Behaviour::Submit),
+            (false, Some(k)) => ("next", button_text(list[k]), Behaviour::Next(p as u16)),
+            (false, None) => ("next", "Next", Behaviour::Next(p as u16)),
+        };
+        let cls = if last {
+            "btn btn-primary btn-lg btn-block"
+        } else {
+            "btn btn-secondary btn-sm btn-block"
+        };
+        self.button(concept, text, cls, beh);
+        self.close(form);
+        self.close(page);
+        page
+    }
+
+    /// Records the field elements `nodes` of active primitive `prim` in `placed`.
+    fn place(&self, prim: Primitive, nodes: Vec<u32>, placed: &mut Vec<(Primitive, Vec<u32>)>) {
+        match placed.iter_mut().find(|(q, _)| *q == prim) {
+            // A later page's copy: a radio group (ids with the page) joins the field; another
+            // control shares the first copy's id and holds nothing.
+            Some((_, first)) => {
+                if nodes
+                    .first()
+                    .is_some_and(|&n| self.nodes[n as usize].tag == Tag::InputRadio)
+                {
+                    first.extend(nodes);
+                }
+            }
+            None => placed.push((prim, nodes)),
+        }
+    }
+
+    /// The profile: one field per placed active primitive, sorted by key, with this episode's
+    /// value; marks the field on its elements.
+    fn profile(&mut self, mut placed: Vec<(Primitive, Vec<u32>)>) -> Vec<Field> {
+        placed.sort_by_key(|(p, _)| p.info().concept);
+        let mut fields = Vec::with_capacity(placed.len());
+        for (k, (prim, nodes)) in placed.into_iter().enumerate() {
+            let info = prim.info();
+            let value = info
+                .value
+                .map(|v| draw_value(v, self.rng))
+                .unwrap_or_default();
+            let value_id = self.intern(value);
+            let kind = match self.nodes[nodes[0] as usize].tag {
+                Tag::InputCheckbox => FieldKind::Check,
+                Tag::InputRadio => FieldKind::Radio,
+                _ => FieldKind::Text,
+            };
+            for &n in &nodes {
+                self.nodes[n as usize].field = Some(k as u16);
+            }
+            fields.push(Field {
+                key: info.concept,
+                value: value.to_string(),
+                value_id,
+                kind,
+                nodes,
+            });
+        }
+        fields
+    }
+}
+
+/// The primitives page `prims` renders: each once, and without an active primitive already
+/// `placed` on an earlier page (unless `quirks.duplicate_fields`).
+fn page_primitives(
+    prims: &[Primitive],
+    placed: &[(Primitive, Vec<u32>)],
+    quirks: Quirks,
+) -> Vec<Primitive> {
+    let mut list: Vec<Primitive> = Vec::new();
+    for (k, &prim) in prims.iter().enumerate() {
+        if prims[..k].contains(&prim) {
+            continue;
+        }
+        if prim.info().active && !quirks.duplicate_fields && placed.iter().any(|(q, _)| *q == prim)
+        {
+            continue;
+        }
+        list.push(prim);
+    }
+    list
+}
+
+/// Tokens of every element's static attributes.
+fn node_tokens(nodes: &[Node], vocab: &Vocabulary) -> Vec<NodeTokens> {
+    nodes
+        .iter()
+        .map(|n| {
+            let cls = if n.classes.is_empty() {
+                "no_class".to_string()
+            } else {
+                n.classes.clone()
+            };
+            NodeTokens {
+                tag: vocab.encode(n.tag.token()),
+                text: vocab.encode(&n.text),
+                placeholder: vocab.encode(&n.placeholder),
+                classes: [
+                    vocab.encode(&cls),
+                    vocab.encode(&format!("{} visited", n.classes)),
+                ],
+            }
+        })
+        .collect()
+}
+
+/// [`Website::id_owner`]: for every element, the element that owns its `id`.
+fn id_owners(nodes: &[Node]) -> Vec<u32> {
+    // A page's extra `next_*` (or `submit`) buttons share the working button's id; the
+    // original bound the transition to the first element with that id and `visitGroup`
+    // acts on the first, so any of them works: the working button owns the id.
+    let mut first_with: HashMap<&str, u32> = nodes
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| matches!(n.behaviour, Behaviour::Next(_) | Behaviour::Submit))
+        .map(|(i, n)| (n.html_id.as_str(), i as u32))
+        .collect();
+    nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            if n.html_id.is_empty() {
+                i as u32
+            } else {
+                *first_with.entry(n.html_id.as_str()).or_insert(i as u32)
+            }
+        })
+        .collect()
 }
 
 fn button_text(prim: Primitive) -> &'static str {
@@ -802,177 +1010,40 @@ impl Website {
             rng,
         };
         let mut placed: Vec<(Primitive, Vec<u32>)> = Vec::new();
-        let mut pages = Vec::new();
         let n_pages = design.pages.len().max(1);
-        let empty = Vec::new();
+        let mut pages = Vec::with_capacity(n_pages);
         for p in 0..n_pages {
-            b.page = p;
-            let prims = design.pages.get(p).unwrap_or(&empty);
-            let mut seen: Vec<Primitive> = Vec::new();
-            let mut list: Vec<Primitive> = Vec::new();
-            for &prim in prims {
-                if seen.contains(&prim) {
-                    continue;
-                }
-                seen.push(prim);
-                if prim.info().active
-                    && !quirks.duplicate_fields
-                    && placed.iter().any(|(q, _)| *q == prim)
-                {
-                    continue;
-                }
-                list.push(prim);
-            }
-            let last = p + 1 == n_pages;
-            let page = b.open(Tag::Div, "page", &format!("page{p}"));
-            b.nodes[page as usize].hidden = p > 0;
-            pages.push(page);
-            for &prim in list.iter().filter(|q| !q.in_form()) {
-                b.primitive(prim);
-            }
-            let form = b.open(Tag::Div, "container", &format!("mainform_p{p}"));
-            let nav = if last {
-                list.iter().position(|q| q.name() == "submit")
-            } else {
-                list.iter().position(|q| is_next(*q))
-            };
-            for (k, &prim) in list.iter().enumerate().filter(|(_, q)| q.in_form()) {
-                if Some(k) == nav {
-                    continue;
-                }
-                if is_next(prim) || prim.name() == "submit" {
-                    let concept = prim.info().concept;
-                    b.button(
-                        concept,
-                        button_text(prim),
-                        "btn btn-secondary btn-sm btn-block",
-                        Behaviour::Actionable,
-                    );
-                    continue;
-                }
-                let nodes = b.primitive(prim);
-                if prim.info().active {
-                    match placed.iter_mut().find(|(q, _)| *q == prim) {
-                        // A later page's copy: a radio group (ids with the page) joins the
-                        // field; another control shares the first copy's id and holds nothing.
-                        Some((_, first)) => {
-                            if nodes
-                                .first()
-                                .is_some_and(|&n| b.nodes[n as usize].tag == Tag::InputRadio)
-                            {
-                                first.extend(nodes);
-                            }
-                        }
-                        None => placed.push((prim, nodes)),
-                    }
-                }
-            }
-            let (concept, text, beh) = match (last, nav) {
-                (true, Some(k)) => ("submit", button_text(list[k]), Behaviour::Submit),
-                (true, None) => ("submit", "Submit", Behaviour::Submit),
-                (false, Some(k)) => ("next", button_text(list[k]), Behaviour::Next(p as u16)),
-                (false, None) => ("next", "Next", Behaviour::Next(p as u16)),
-            };
-            let cls = if last {
-                "btn btn-primary btn-lg btn-block"
-            } else {
-                "btn btn-secondary btn-sm btn-block"
-            };
-            b.button(concept, text, cls, beh);
-            b.close(form);
-            b.close(page);
+            let prims = design.pages.get(p).map_or(&[][..], Vec::as_slice);
+            let list = page_primitives(prims, &placed, quirks);
+            pages.push(b.page(p, p + 1 == n_pages, &list, &mut placed));
         }
-        // Profile: one field per placed active primitive, sorted by key.
-        placed.sort_by_key(|(p, _)| p.info().concept);
-        let mut fields = Vec::new();
-        for (k, (prim, nodes)) in placed.iter().enumerate() {
-            let info = prim.info();
-            let value = info.value.map(|v| draw_value(v, b.rng)).unwrap_or_default();
-            let value_id = b.intern(value);
-            let kind = match b.nodes[nodes[0] as usize].tag {
-                Tag::InputCheckbox => FieldKind::Check,
-                Tag::InputRadio => FieldKind::Radio,
-                _ => FieldKind::Text,
-            };
-            for &n in nodes {
-                b.nodes[n as usize].field = Some(k as u16);
-            }
-            fields.push(Field {
-                key: info.concept,
-                value: value.to_string(),
-                value_id,
-                kind,
-                nodes: nodes.clone(),
-            });
-        }
+        let fields = b.profile(placed);
         let Builder {
             nodes,
             strings,
             radio_groups,
             ..
         } = b;
-        let string_tokens = strings.iter().map(|s| vocab.encode(s)).collect();
-        let tokens = nodes
-            .iter()
-            .map(|n| {
-                let cls = if n.classes.is_empty() {
-                    "no_class".to_string()
-                } else {
-                    n.classes.clone()
-                };
-                NodeTokens {
-                    tag: vocab.encode(n.tag.token()),
-                    text: vocab.encode(&n.text),
-                    placeholder: vocab.encode(&n.placeholder),
-                    classes: [
-                        vocab.encode(&cls),
-                        vocab.encode(&format!("{} visited", n.classes)),
-                    ],
-                }
-            })
-            .collect();
-        let profile_tokens = fields
-            .iter()
-            .map(|f| (vocab.encode(f.key), vocab.encode(&f.value)))
-            .collect();
-        let controls = nodes
-            .iter()
-            .enumerate()
-            .filter(|(_, n)| n.tag.is_control())
-            .map(|(i, _)| i as u32)
-            .collect();
-        // A page's extra `next_*` (or `submit`) buttons share the working button's id; the
-        // original bound the transition to the first element with that id and `visitGroup`
-        // acts on the first, so any of them works: the working button owns the id.
-        let mut first_with: HashMap<&str, u32> = nodes
-            .iter()
-            .enumerate()
-            .filter(|(_, n)| matches!(n.behaviour, Behaviour::Next(_) | Behaviour::Submit))
-            .map(|(i, n)| (n.html_id.as_str(), i as u32))
-            .collect();
-        let id_owner = nodes
-            .iter()
-            .enumerate()
-            .map(|(i, n)| {
-                if n.html_id.is_empty() {
-                    i as u32
-                } else {
-                    *first_with.entry(n.html_id.as_str()).or_insert(i as u32)
-                }
-            })
-            .collect();
         Website {
             design: design.clone(),
+            string_tokens: strings.iter().map(|s| vocab.encode(s)).collect(),
+            tokens: node_tokens(&nodes, vocab),
+            profile_tokens: fields
+                .iter()
+                .map(|f| (vocab.encode(f.key), vocab.encode(&f.value)))
+                .collect(),
+            controls: nodes
+                .iter()
+                .enumerate()
+                .filter(|(_, n)| n.tag.is_control())
+                .map(|(i, _)| i as u32)
+                .collect(),
+            id_owner: id_owners(&nodes),
             nodes,
             pages,
             fields,
             strings,
-            string_tokens,
-            tokens,
-            profile_tokens,
-            controls,
             radio_groups,
-            id_owner,
         }
     }
 

@@ -5,8 +5,8 @@ mod common;
 
 use a2perf_core::RngStream;
 use a2perf_web::{
-    Design, Limits, OOV_ID, Vocabulary, WebNavConfig, WebNavEnv, Website, generate, load_designs,
-    report,
+    Design, Limits, OOV_ID, Quirks, Vocabulary, WebNavConfig, WebNavEnv, Website, generate,
+    load_designs, report,
 };
 use common::{oracle_episode, shared};
 
@@ -73,6 +73,55 @@ fn generation_is_deterministic_and_seed_dependent() {
     let b = Website::build(d, &mut RngStream::new(1, "x"), Vocabulary::standard());
     assert_eq!(a, b);
     assert_eq!(a.to_html(false), b.to_html(false));
+}
+
+/// FNV-1a 64 of `text` continued from `h` (stable across Rust versions, unlike std's hasher).
+fn fnv(h: u64, text: &str) -> u64 {
+    text.bytes().fold(h, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01B3)
+    })
+}
+
+/// Pins the generator's output: the designs `generate` picks (index, difficulty bits, pages) for
+/// three seeds at every level, and the websites built from them (every element, string, field and
+/// token, as `Debug` prints them, and both HTML renderings) for two episodes, with and without
+/// `duplicate_fields`. A refactoring of the generator or of `Website::build` must leave it alone;
+/// a deliberate change of the output has to update the constant and say why.
+///
+/// The constant was computed on the code before `Website::build_with` and `Builder::primitive`
+/// were split into steps (commit 9603bb3).
+#[test]
+fn generated_websites_are_pinned() {
+    const PINNED: u64 = 0x6a9d_61d8_199e_1c31;
+    let limits = Limits::default();
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for level in 1..=3u8 {
+        for seed in [0u64, 7, 2024] {
+            for g in generate(level, seed, 4, &limits) {
+                let head = format!("{} {:x} {:?}", g.index, g.difficulty.to_bits(), g.design);
+                h = fnv(h, &head);
+                for episode in 0..2u64 {
+                    for duplicate_fields in [false, true] {
+                        let quirks = Quirks {
+                            duplicate_fields,
+                            ..Quirks::default()
+                        };
+                        let mut rng = RngStream::new(episode, "pin");
+                        let site = Website::build_with(
+                            &g.design,
+                            &mut rng,
+                            Vocabulary::standard(),
+                            quirks,
+                        );
+                        h = fnv(h, &format!("{site:?}"));
+                        h = fnv(h, &site.to_html(false));
+                        h = fnv(h, &site.to_html(true));
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(h, PINNED, "generated websites changed: {h:#018x}");
 }
 
 #[test]
