@@ -19,8 +19,15 @@
 //!   plc_client_os does, so only the ratio of the factors matters within a step);
 //! - a move that would leave the canvas is cancelled on that axis.
 //!
-//! Initial positions (`use_current_loc = False` in CT): every movable node at the canvas centre,
-//! offset on a tiny golden-angle spiral so that repulsion has a direction (ours).
+//! Initial positions (`use_current_loc = False` in CT): every movable node at the exact canvas
+//! centre, as circuit_training's placer and MacroPlacement's `plc_client_os` start. Two
+//! overlapping objects with the same centre are pushed apart along `(−1, −1)/√2` (the one of lower
+//! node index) and `(1, 1)/√2` (the other), `plc_client_os`'s rule; attraction to the fixed pins
+//! separates most of them in the first round, which has no repulsion.
+//!
+//! Parity: `tests/fd_parity.rs` runs this placer against goldens from `plc_client_os`'s
+//! `optimize_stdcells` (toy with six macro placements, Ariane133 legalized): positions agree to
+//! rounding through the first round and the end-of-schedule proxy cost within 1e-3.
 //!
 //! Implementation (same forces, summed in a different order than a per-net loop would): springs
 //! are linear, so all springs of an object to fixed pins fold into one term `h − g·p`, and
@@ -150,6 +157,32 @@ struct BucketItem {
 /// assert!(cost.costs().proxy_cost.is_finite());
 /// ```
 pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut FdScratch) {
+    place_std_cells_steps(cost, schedule, s, usize::MAX);
+}
+
+/// [`place_std_cells`] stopped after the first `max_steps` steps of the schedule (counted across
+/// rounds; each round keeps its own maximum move, `f·max(W, H)/num_steps`). Shows the state of the
+/// placer part-way through a schedule, e.g. to compare it step by step with another
+/// implementation; `usize::MAX` runs the whole schedule.
+///
+/// ```
+/// use a2perf_circuit::{generate, GeneratorConfig, NodeKind, PlacementCost};
+/// use a2perf_circuit::placer::{FdSchedule, FdScratch, place_std_cells_steps};
+/// let g = generate(&GeneratorConfig::small(), 0);
+/// let mut cost = PlacementCost::new(&g.netlist, g.settings.clone()).unwrap();
+/// cost.apply_placement(&g.placement).unwrap();
+/// place_std_cells_steps(&mut cost, &FdSchedule::default(), &mut FdScratch::default(), 0);
+/// // No step taken: every soft macro still sits at the canvas centre, where the placer starts.
+/// let centre = (g.settings.canvas_width / 2.0, g.settings.canvas_height / 2.0);
+/// let soft = (0..cost.num_nodes()).find(|&i| cost.kind(i) == NodeKind::SoftMacro).unwrap();
+/// assert_eq!(cost.position(soft), centre);
+/// ```
+pub fn place_std_cells_steps(
+    cost: &mut PlacementCost,
+    schedule: &FdSchedule,
+    s: &mut FdScratch,
+    max_steps: usize,
+) {
     let n = cost.kind.len();
     let (cw, ch) = (cost.settings.canvas_width, cost.settings.canvas_height);
     let move_macros = schedule.move_macros;
@@ -178,7 +211,6 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
     s.obj_of.resize(n, NONE);
     s.pos.clear();
     s.half.clear();
-    let r0 = 1e-3 * cw.min(ch);
     for (k, &i) in s.node.iter().enumerate() {
         let i = i as usize;
         s.obj_of[i] = k as u32;
@@ -186,11 +218,7 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         if k < hard {
             s.pos.push([cost.x[i], cost.y[i]]);
         } else {
-            // Centre start on a golden-angle spiral (CT starts from the centre).
-            let j = k - hard;
-            let a = j as f64 * 2.399_963_229_728_653;
-            let r = r0 * ((j + 1) as f64).sqrt();
-            s.pos.push([cw / 2.0 + r * a.cos(), ch / 2.0 + r * a.sin()]);
+            s.pos.push([cw / 2.0, ch / 2.0]);
         }
     }
     // Springs to fixed pins (hard-macro pins, ports) are linear in the object's own position, so
@@ -289,6 +317,7 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         .min(schedule.attract.len())
         .min(schedule.repel.len())
         .min(schedule.move_distance_factors.len());
+    let mut left = max_steps;
     for round in 0..rounds {
         let steps = schedule.num_steps[round];
         if steps == 0 {
@@ -296,7 +325,9 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         }
         let max_move = schedule.move_distance_factors[round] * cw.max(ch) / steps as f64;
         let attract = schedule.attract[round];
-        for _ in 0..steps {
+        let run = steps.min(left);
+        left -= run;
+        for _ in 0..run {
             step(
                 s,
                 (cw, ch),
@@ -368,20 +399,20 @@ fn step(
         mx = mx.max(f[0].abs());
         my = my.max(f[1].abs());
     }
-    let sx = if mx > 0.0 { max_move / mx } else { 0.0 };
-    let sy = if my > 0.0 { max_move / my } else { 0.0 };
+    // Rounded as plc_client_os rounds them (`f / max · move`, edges `x ± w/2 + d`), so that the
+    // parity test compares the algorithms, not the association of their sums.
+    let norm = |f: f64, m: f64| if m > 0.0 { f / m * max_move } else { 0.0 };
     for k in hard..nobj {
         let [hw, hh] = s.half[k];
         let [fx, fy] = s.force[k];
         let p = &mut s.pos[k];
-        let nx = p[0] + fx * sx;
-        let ny = p[1] + fy * sy;
+        let (dx, dy) = (norm(fx, mx), norm(fy, my));
         // A move that would leave the canvas is cancelled on that axis.
-        if nx - hw > 0.0 && nx + hw < cw {
-            p[0] = nx;
+        if p[0] - hw + dx > 0.0 && p[0] + hw + dx < cw {
+            p[0] += dx;
         }
-        if ny - hh > 0.0 && ny + hh < ch {
-            p[1] = ny;
+        if p[1] - hh + dy > 0.0 && p[1] + hh + dy < ch {
+            p[1] += dy;
         }
     }
 }
@@ -494,18 +525,24 @@ fn repulsion(s: &mut FdScratch, (cw, ch): (f64, f64), mag: f64, max_soft: f64, h
             }
         }
     }
-    let pos = &s.pos[..];
+    let (bbox, node) = (&s.bbox[..], &s.node[..]);
     let force = &mut s.force[..];
     for &[u, v] in &s.pairs[..n] {
         let (u, v) = (u as usize, v as usize);
-        let (ddx, ddy) = (pos[u][0] - pos[v][0], pos[u][1] - pos[v][1]);
-        let d = (ddx * ddx + ddy * ddy).sqrt();
-        let r = mag / d;
-        let (fx, fy) = if d == 0.0 {
-            let c = -std::f64::consts::FRAC_1_SQRT_2 * mag;
+        // Centres as plc_client_os takes them, from the bounding boxes.
+        let (bu, bv) = (bbox[u], bbox[v]);
+        let ddx = (bu[0] + bu[2]) / 2.0 - (bv[0] + bv[2]) / 2.0;
+        let ddy = (bu[1] + bu[3]) / 2.0 - (bv[1] + bv[3]) / 2.0;
+        let (fx, fy) = if ddx == 0.0 && ddy == 0.0 {
+            // Same centre (every node starts at the canvas centre): the lower node index goes
+            // along (−1, −1)/√2, the other the opposite way.
+            // `1/√2` rounded as plc_client_os computes it (one ulp below FRAC_1_SQRT_2).
+            let c = mag * (1.0 / 2f64.sqrt());
+            let c = if node[u] < node[v] { -c } else { c };
             (c, c)
         } else {
-            (ddx * r, ddy * r)
+            let d = (ddx * ddx + ddy * ddy).sqrt();
+            (mag * (ddx / d), mag * (ddy / d))
         };
         // Obstacles' force slots absorb their share unread (cleared each step), so no branch.
         force[u][0] += fx;
