@@ -8,10 +8,8 @@
 //! `plc_client_os` reads them.
 //!
 //! Checked: the movable nodes' positions after 1, 10 and 100 steps (the first round: attraction
-//! only), after 101 and 110 steps (into the second round, with repulsion), and the proxy cost at
-//! the end of the schedule. The schedule is chaotic once repulsion acts (overlap tests and
-//! cancelled moves are discontinuous, and the two implementations sum forces in different
-//! orders), so the end is compared by proxy cost only.
+//! only) and after 101, 110, 200 and 300 steps (with repulsion; where the golden has them), and
+//! the proxy cost at the end of the schedule (to the 1e-3; it is equal as well).
 
 mod common;
 
@@ -34,8 +32,9 @@ struct Case {
     hard_macros: BTreeMap<usize, (f64, f64, String)>,
     /// Cumulative schedule step → node index → `[x, y]` of every movable node.
     positions_after_steps: BTreeMap<usize, BTreeMap<usize, [f64; 2]>>,
-    /// Costs of plc_client_os's final placement.
-    end: End,
+    /// Costs of plc_client_os's final placement (`null` where its run did not reach the end of
+    /// the schedule, see the README).
+    end: Option<End>,
 }
 
 #[derive(Deserialize)]
@@ -43,23 +42,16 @@ struct End {
     proxy_cost: f64,
 }
 
-/// Largest position error (µm) allowed after `steps` steps, relative to the canvas side.
-/// Through the first round both run the same arithmetic up to the order of the force sums, so
-/// the positions agree to a few ulps of the canvas (measured: below 1e-12 of the side after 100
-/// steps); 1e-9 leaves room for other platforms' `sqrt`/FMA choices. After 110 steps (ten steps
-/// with repulsion) the measured error is below 1e-9 of the side as well, but one flipped overlap
-/// test would change it by a whole step, so those are allowed 1e-6.
-fn tolerance(steps: usize) -> Option<f64> {
-    match steps {
-        0..=100 => Some(1e-9),
-        101..=110 => Some(1e-6),
-        // Printed, not checked: the schedule is chaotic from here on.
-        _ => None,
-    }
-}
+/// Largest position error allowed, relative to the canvas side, at every recorded step. Both
+/// placers sum the same products in the same order (plc_client_os's), so the positions are
+/// bit-identical (measured: error at most 2.3e-13 µm at every recorded step of every case, which
+/// is serde_json's default float parsing of the goldens, not the placer). Any difference would
+/// grow quickly: Ariane's first round is unstable enough that a reordered sum (an earlier version
+/// of ours) drifted from 1e-12 µm at step 50 to 77 µm at step 100.
+const POSITION_TOL: f64 = 1e-9;
 
-/// End-of-schedule proxy cost tolerance (the bound; the chaotic second and third rounds
-/// make positions incomparable, the proxy cost stays within it).
+/// End-of-schedule proxy cost tolerance (the bound; the schedule is chaotic, so a
+/// platform that rounds differently would still be held to it).
 const PROXY_TOL: f64 = 1e-3;
 
 fn golden() -> BTreeMap<String, Case> {
@@ -108,7 +100,7 @@ fn positions_and_end_proxy_match_plc_client_os() {
         return;
     };
     let cases = golden();
-    assert_eq!(cases.len(), 6, "six toy placements and Ariane133");
+    assert_eq!(cases.len(), 7, "six toy placements and Ariane133");
     let schedule = FdSchedule::default();
     let mut scratch = FdScratch::default();
     let mut failures = Vec::new();
@@ -132,25 +124,24 @@ fn positions_and_end_proxy_match_plc_client_os() {
             );
             let err = max_error(&cost, want);
             eprintln!("{name} after {steps:>3} steps: max position error {err:.3e} µm");
-            if let Some(tol) = tolerance(steps)
-                && err > tol * side
-            {
+            if err > POSITION_TOL * side {
                 failures.push(format!("{name} after {steps} steps: {err:e} µm"));
             }
         }
         let mut cost = start.clone();
         place_std_cells_steps(&mut cost, &schedule, &mut scratch, usize::MAX);
         let proxy = cost.costs().proxy_cost;
-        let diff = proxy - case.end.proxy_cost;
+        let Some(end) = &case.end else {
+            eprintln!("{name}: end proxy ours {proxy:.9}, no golden");
+            continue;
+        };
+        let diff = proxy - end.proxy_cost;
         eprintln!(
             "{name}: end proxy ours {proxy:.9} plc_client_os {:.9} (diff {diff:+.2e})",
-            case.end.proxy_cost
+            end.proxy_cost
         );
         if diff.abs() > PROXY_TOL {
-            failures.push(format!(
-                "{name} end proxy: {proxy} vs {}",
-                case.end.proxy_cost
-            ));
+            failures.push(format!("{name} end proxy: {proxy} vs {}", end.proxy_cost));
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");

@@ -253,7 +253,29 @@ def run(plc_mod, netlist_path, plc_path, canvas, grid, square, soft_map, restore
     }
 
 
+def from_debug_log(log_path, steps):
+    """Positions after the given cumulative steps, read from the log plc_client_os appends to
+    `os_debug.txt` in the working directory: one line `node x y dx dy` per soft macro per step
+    (in its soft-macro order, floats printed round-trip exactly). For a run cut short: the Ariane
+    case's positions came from the log of a run that had not reached the end of the schedule."""
+    rows = [l.split() for l in open(log_path) if l.strip()]
+    per_step = len({r[0] for r in rows})
+    snaps = {}
+    for k in steps:
+        block = rows[(k - 1) * per_step:k * per_step]
+        if len(block) == per_step:
+            snaps[str(k)] = {r[0]: [float(r[1]), float(r[2])] for r in block}
+    return snaps
+
+
 def main():
+    if sys.argv[1] == "--from-debug-log":
+        # make_golden.py --from-debug-log OS_DEBUG_TXT OUT_JSON CASE NETLIST PLACEMENT
+        log, out_path, case, netlist, placement = sys.argv[2:7]
+        r = {"netlist": netlist, "placement": placement,
+             "positions_after_steps": from_debug_log(log, RECORD), "end": None}
+        json.dump({case: r}, open(out_path, "w"), indent=1)
+        return
     client_dir, data, out_path = sys.argv[1:4]
     only = set(sys.argv[4:])
     sys.path.insert(0, client_dir)
