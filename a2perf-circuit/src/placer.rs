@@ -1,11 +1,13 @@
 //! A deterministic force-directed placer for soft macros and standard cells (and, for the
 //! mixed-size run that seeds the environment's initial locations, hard macros too).
 //!
-//! **This is our placer, not Google's** (whose `optimize_stdcells` is closed). It follows the
-//! schedules circuit_training passes to it: at the end of every episode ([`FdSchedule::default`])
-//! three rounds of 100 steps, maximum move `f·max(W, H)/num_steps` per step with `f = 1`,
-//! attraction factors `[100, 1e-3, 1e-5]` and repulsion factors `[0, 1e6, 1e7]`, I/O factor 1,
-//! hard macros fixed; once in the environment's constructor ([`FdSchedule::mixed_size`]) the same
+//! **This is our placer, not Google's** (whose `optimize_stdcells` is closed); on the
+//! end-of-episode schedule it computes what MacroPlacement's open re-implementation
+//! `plc_client_os` computes, to the bit (`plc_client_os` cannot move hard macros). It follows the
+//! schedules circuit_training passes to it: at the end of every episode
+//! ([`FdSchedule::default`]) three rounds of 100 steps, maximum move `f·max(W, H)/num_steps` per
+//! step with `f = 1`, attraction factors `[100, 1e-3, 1e-5]` and repulsion factors
+//! `[0, 1e6, 1e7]`, I/O factor 1, hard macros fixed; once in the environment's constructor ([`FdSchedule::mixed_size`]) the same
 //! with `f = [1, 2, 2]`, repulsion `[0, 1e5, 1e6]` and the hard macros moving as well. Per step:
 //!
 //! - attraction: every net pulls each sink pin towards its driver pin and the driver towards each
@@ -19,17 +21,24 @@
 //!   plc_client_os does, so only the ratio of the factors matters within a step);
 //! - a move that would leave the canvas is cancelled on that axis.
 //!
-//! Initial positions (`use_current_loc = False` in CT): every movable node at the canvas centre,
-//! offset on a tiny golden-angle spiral so that repulsion has a direction (ours).
+//! Initial positions (`use_current_loc = False` in CT): every movable node at the exact canvas
+//! centre, as circuit_training's placer and MacroPlacement's `plc_client_os` start. Two
+//! overlapping objects with the same centre are pushed apart along `(−1, −1)/√2` (the one of lower
+//! node index) and `(1, 1)/√2` (the other), `plc_client_os`'s rule; attraction to the fixed pins
+//! separates most of them in the first round, which has no repulsion.
 //!
-//! Implementation (same forces, summed in a different order than a per-net loop would): springs
-//! are linear, so all springs of an object to fixed pins fold into one term `h − g·p`, and
-//! parallel springs between the same two objects merge into one; each object then gathers its
-//! attraction from its partners without scattered writes. Overlapping pairs are collected without
-//! data-dependent branches before their forces are computed. The schedule is sensitive to
-//! rounding (overlap tests and cancelled moves are discontinuous), so such reorderings change the
-//! final placement's proxy cost by tenths of a percent; the result is still bit-identical from
-//! run to run.
+//! Parity: `tests/fd_parity.rs` runs this placer against goldens from `plc_client_os`'s
+//! `optimize_stdcells` (the toy with six macro placements, Ariane133 `legalized.plc`): the
+//! positions are the same to the bit through the schedule, so is the final proxy cost.
+//!
+//! Implementation: every sum is formed in `plc_client_os`'s order, because the schedule amplifies
+//! rounding (on Ariane a reordered attraction sum drifts from 1e-12 µm at step 50 to 77 µm at step
+//! 100, and overlap tests and cancelled moves are discontinuous): each object's springs in net
+//! order and sink order, its pushes in increasing order of the other object's node index, centres
+//! taken from the bounding boxes, displacements normalised as `f / max · move`. Each object
+//! gathers its springs from a per-object list, without scattered writes; overlapping pairs are
+//! found with a bucket grid and collected without data-dependent branches, then sorted into that
+//! order. The result is bit-identical from run to run.
 
 use crate::cost::PlacementCost;
 use crate::netlist::NodeKind;
@@ -110,22 +119,29 @@ pub struct FdScratch {
     bucket_hard: Vec<u32>,
     bucket_items: Vec<BucketItem>,
     bucket_fill: Vec<u32>,
-    // Springs between two movable objects, per object (each spring listed at both ends), as
-    // compressed rows over `[hard, nobj)`: partner slot and stiffness `w · fac` (without the
-    // round's attraction factor). Gathering per object needs no scattered force writes.
-    adj_start: Vec<u32>,
-    adj_j: Vec<u32>,
-    adj_c: Vec<f64>,
-    edges: Vec<(u32, u32, u32, f64)>,
-    // All springs of an object, `g = Σ c` over its partners, and `h = Σ c · q` over its fixed
-    // partners q (hard-macro pins, ports): `force = attract · (h + Σ c_j p_j − g · p)`.
-    lin_g: Vec<f64>,
-    lin_h: Vec<[f64; 2]>,
+    // Springs per movable object, as compressed rows over `[hard, nobj)`, each row in the order
+    // plc_client_os visits them (nets in driver order, sinks in input order; a spring between two
+    // pins of the same object is listed twice, as there): the summation order of its forces.
+    term_start: Vec<u32>,
+    terms: Vec<Term>,
+    term_seq: Vec<(u32, Term)>,
+    // `c · attract` of every term for the current round.
+    coef: Vec<f64>,
     // Overlapping pairs of the current step.
     pairs: Vec<[u32; 2]>,
 }
 
 const NONE: u32 = u32::MAX;
+
+/// One spring seen from the object that it pulls: `force += c · attract · (q' − (p + own))`, where
+/// `q' = q` for a fixed partner pin (`j == NONE`) and `q' = pos[j] + q` for a movable one.
+#[derive(Clone, Copy, Debug, Default)]
+struct Term {
+    j: u32,
+    c: f64,
+    own: [f64; 2],
+    q: [f64; 2],
+}
 
 /// One object's entry in a repulsion bucket: a copy of what the pair test needs, so a bucket's
 /// pair loop streams through contiguous memory.
@@ -150,6 +166,32 @@ struct BucketItem {
 /// assert!(cost.costs().proxy_cost.is_finite());
 /// ```
 pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut FdScratch) {
+    place_std_cells_steps(cost, schedule, s, usize::MAX);
+}
+
+/// [`place_std_cells`] stopped after the first `max_steps` steps of the schedule (counted across
+/// rounds; each round keeps its own maximum move, `f·max(W, H)/num_steps`). Shows the state of the
+/// placer part-way through a schedule, e.g. to compare it step by step with another
+/// implementation; `usize::MAX` runs the whole schedule.
+///
+/// ```
+/// use a2perf_circuit::{generate, GeneratorConfig, NodeKind, PlacementCost};
+/// use a2perf_circuit::placer::{FdSchedule, FdScratch, place_std_cells_steps};
+/// let g = generate(&GeneratorConfig::small(), 0);
+/// let mut cost = PlacementCost::new(&g.netlist, g.settings.clone()).unwrap();
+/// cost.apply_placement(&g.placement).unwrap();
+/// place_std_cells_steps(&mut cost, &FdSchedule::default(), &mut FdScratch::default(), 0);
+/// // No step taken: every soft macro still sits at the canvas centre, where the placer starts.
+/// let centre = (g.settings.canvas_width / 2.0, g.settings.canvas_height / 2.0);
+/// let soft = (0..cost.num_nodes()).find(|&i| cost.kind(i) == NodeKind::SoftMacro).unwrap();
+/// assert_eq!(cost.position(soft), centre);
+/// ```
+pub fn place_std_cells_steps(
+    cost: &mut PlacementCost,
+    schedule: &FdSchedule,
+    s: &mut FdScratch,
+    max_steps: usize,
+) {
     let n = cost.kind.len();
     let (cw, ch) = (cost.settings.canvas_width, cost.settings.canvas_height);
     let move_macros = schedule.move_macros;
@@ -178,7 +220,6 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
     s.obj_of.resize(n, NONE);
     s.pos.clear();
     s.half.clear();
-    let r0 = 1e-3 * cw.min(ch);
     for (k, &i) in s.node.iter().enumerate() {
         let i = i as usize;
         s.obj_of[i] = k as u32;
@@ -186,26 +227,16 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         if k < hard {
             s.pos.push([cost.x[i], cost.y[i]]);
         } else {
-            // Centre start on a golden-angle spiral (CT starts from the centre).
-            let j = k - hard;
-            let a = j as f64 * 2.399_963_229_728_653;
-            let r = r0 * ((j + 1) as f64).sqrt();
-            s.pos.push([cw / 2.0 + r * a.cos(), ch / 2.0 + r * a.sin()]);
+            s.pos.push([cw / 2.0, ch / 2.0]);
         }
     }
-    // Springs to fixed pins (hard-macro pins, ports) are linear in the object's own position, so
-    // all of an object's fixed springs fold into one term `h - g·p` (g = Σ w·fac, h = Σ w·fac·q
-    // over its fixed partners q), evaluated once per object per step instead of once per pin.
-    // Only springs between two movable objects stay per pin: nets with a movable driver, listed
-    // driver first with their movable sinks. Sinks on the driver's own node are dropped (their
-    // force is exactly zero), and so are springs between two fixed pins. A movable pin's offset
-    // from its owner's centre (non-zero only for moving hard macros) is a constant of the spring
-    // and folds into `h` as well: the pull on p's owner is `c·(q − o_p − p)`.
-    s.edges.clear();
-    s.lin_g.clear();
-    s.lin_g.resize(nobj, 0.0);
-    s.lin_h.clear();
-    s.lin_h.resize(nobj, [0.0, 0.0]);
+    // Each spring pulls its driver pin towards its sink pin and the sink towards the driver with
+    // `w · attract · distance` (× the I/O factor when a port is involved). The terms are kept per
+    // pulled object in plc_client_os's order, so that each object's force is the same sum of the
+    // same products as there: Ariane's first round is unstable enough that a reordered sum
+    // drifts off after ~60 steps. A pin's position is its owner's centre plus its oriented
+    // offset (fixed pins: their current position).
+    s.term_seq.clear();
     for net in 0..cost.net_w.len() {
         let (a, b) = (
             cost.net_start[net] as usize,
@@ -213,70 +244,46 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         );
         let w = cost.net_w[net];
         let driver = cost.pin_owner[a] as usize;
-        let driver_mov = is_mov(cost, driver);
         let driver_port = cost.kind[driver] == NodeKind::Port;
-        let (qx, qy) = (cost.pin_x[a], cost.pin_y[a]);
-        let (odx, ody) = (cost.pin_rdx[a], cost.pin_rdy[a]);
         for p in a + 1..b {
             let o = cost.pin_owner[p] as usize;
-            let mov = is_mov(cost, o);
             let port = driver_port || cost.kind[o] == NodeKind::Port;
-            let c = w * if port { schedule.io_factor } else { 1.0 };
-            match (driver_mov, mov) {
-                (true, true) if o != driver => {
-                    let (kd, ko) = (s.obj_of[driver], s.obj_of[o]);
-                    let seq = s.edges.len() as u32;
-                    s.edges.push((kd, ko, seq, c));
-                    s.edges.push((ko, kd, seq + 1, c));
-                    s.lin_g[kd as usize] += c;
-                    s.lin_g[ko as usize] += c;
-                    let (dx, dy) = (cost.pin_rdx[p] - odx, cost.pin_rdy[p] - ody);
-                    if dx != 0.0 || dy != 0.0 {
-                        let (d, k) = (kd as usize, ko as usize);
-                        s.lin_h[d][0] += c * dx;
-                        s.lin_h[d][1] += c * dy;
-                        s.lin_h[k][0] -= c * dx;
-                        s.lin_h[k][1] -= c * dy;
-                    }
+            let c = if port { w * schedule.io_factor } else { w };
+            // (pulled pin, partner pin)
+            for (me, other) in [(a, p), (p, a)] {
+                let k = s.obj_of[cost.pin_owner[me] as usize];
+                if k == NONE || (k as usize) < hard {
+                    continue;
                 }
-                (true, false) => {
-                    let k = s.obj_of[driver] as usize;
-                    s.lin_g[k] += c;
-                    s.lin_h[k][0] += c * (cost.pin_x[p] - odx);
-                    s.lin_h[k][1] += c * (cost.pin_y[p] - ody);
-                }
-                (false, true) => {
-                    let k = s.obj_of[o] as usize;
-                    s.lin_g[k] += c;
-                    s.lin_h[k][0] += c * (qx - cost.pin_rdx[p]);
-                    s.lin_h[k][1] += c * (qy - cost.pin_rdy[p]);
-                }
-                _ => {}
+                let j = s.obj_of[cost.pin_owner[other] as usize];
+                let partner_moves = j != NONE && j as usize >= hard;
+                s.term_seq.push((
+                    k,
+                    Term {
+                        j: if partner_moves { j } else { NONE },
+                        c,
+                        own: [cost.pin_rdx[me], cost.pin_rdy[me]],
+                        q: if partner_moves {
+                            [cost.pin_rdx[other], cost.pin_rdy[other]]
+                        } else {
+                            [cost.pin_x[other], cost.pin_y[other]]
+                        },
+                    },
+                ));
             }
         }
     }
-    // Rows by object; parallel springs between the same two objects (clusters share many nets)
-    // merge into one, summed in net order. The keys are unique, so the order is deterministic.
-    s.edges.sort_unstable_by_key(|&(k, j, seq, _)| (k, j, seq));
-    s.adj_start.clear();
-    s.adj_start.resize(nobj - hard + 1, 0);
-    s.adj_j.clear();
-    s.adj_c.clear();
-    let mut last = (NONE, NONE);
-    for &(k, j, _, c) in &s.edges {
-        if (k, j) == last {
-            if let Some(sum) = s.adj_c.last_mut() {
-                *sum += c;
-            }
-        } else {
-            last = (k, j);
-            s.adj_j.push(j);
-            s.adj_c.push(c);
-            s.adj_start[k as usize - hard + 1] += 1;
-        }
+    // Stable: each object's terms stay in visiting order.
+    s.term_seq.sort_by_key(|&(k, _)| k);
+    s.term_start.clear();
+    s.term_start.resize(nobj - hard + 1, 0);
+    s.terms.clear();
+    for &(k, t) in &s.term_seq {
+        s.term_start[k as usize - hard + 1] += 1;
+        s.terms.push(t);
     }
     for k in 0..nobj - hard {
-        s.adj_start[k + 1] += s.adj_start[k];
+        s.term_start[k + 1] += s.term_start[k];
     }
     s.force.clear();
     s.force.resize(nobj, [0.0, 0.0]);
@@ -289,6 +296,7 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         .min(schedule.attract.len())
         .min(schedule.repel.len())
         .min(schedule.move_distance_factors.len());
+    let mut left = max_steps;
     for round in 0..rounds {
         let steps = schedule.num_steps[round];
         if steps == 0 {
@@ -296,7 +304,12 @@ pub fn place_std_cells(cost: &mut PlacementCost, schedule: &FdSchedule, s: &mut 
         }
         let max_move = schedule.move_distance_factors[round] * cw.max(ch) / steps as f64;
         let attract = schedule.attract[round];
-        for _ in 0..steps {
+        let run = steps.min(left);
+        left -= run;
+        // Each spring's force factor of the round, `(w · io) · attract` as plc_client_os rounds it.
+        s.coef.clear();
+        s.coef.extend(s.terms.iter().map(|t| t.c * attract));
+        for _ in 0..run {
             step(
                 s,
                 (cw, ch),
@@ -330,32 +343,24 @@ fn step(
     s.force[..hard].iter_mut().for_each(|f| *f = [0.0, 0.0]);
     if attract != 0.0 {
         let pos = &s.pos[..];
-        for (((f, &[px, py]), (&g, &[hx, hy])), w) in s.force[hard..nobj]
+        for ((f, &[px, py]), w) in s.force[hard..nobj]
             .iter_mut()
             .zip(&pos[hard..nobj])
-            .zip(s.lin_g[hard..nobj].iter().zip(&s.lin_h[hard..nobj]))
-            .zip(s.adj_start.windows(2))
+            .zip(s.term_start.windows(2))
         {
+            let mut sum = [0.0, 0.0];
             let (a, b) = (w[0] as usize, w[1] as usize);
-            // Two independent accumulators halve the add-latency chain.
-            let (mut s0, mut s1) = ([hx, hy], [0.0, 0.0]);
-            let (js, cs) = (&s.adj_j[a..b], &s.adj_c[a..b]);
-            let mut pairs_j = js.chunks_exact(2);
-            let mut pairs_c = cs.chunks_exact(2);
-            for (j, c) in (&mut pairs_j).zip(&mut pairs_c) {
-                let [x0, y0] = pos[j[0] as usize];
-                let [x1, y1] = pos[j[1] as usize];
-                s0 = [s0[0] + c[0] * x0, s0[1] + c[0] * y0];
-                s1 = [s1[0] + c[1] * x1, s1[1] + c[1] * y1];
+            for (t, &coef) in s.terms[a..b].iter().zip(&s.coef[a..b]) {
+                let q = if t.j == NONE {
+                    t.q
+                } else {
+                    let [x, y] = pos[t.j as usize];
+                    [x + t.q[0], y + t.q[1]]
+                };
+                sum[0] += coef * (q[0] - (px + t.own[0]));
+                sum[1] += coef * (q[1] - (py + t.own[1]));
             }
-            for (&j, &c) in pairs_j.remainder().iter().zip(pairs_c.remainder()) {
-                let [x, y] = pos[j as usize];
-                s0 = [s0[0] + c * x, s0[1] + c * y];
-            }
-            *f = [
-                attract * ((s0[0] + s1[0]) - g * px),
-                attract * ((s0[1] + s1[1]) - g * py),
-            ];
+            *f = sum;
         }
     } else {
         s.force.iter_mut().for_each(|f| *f = [0.0, 0.0]);
@@ -368,20 +373,20 @@ fn step(
         mx = mx.max(f[0].abs());
         my = my.max(f[1].abs());
     }
-    let sx = if mx > 0.0 { max_move / mx } else { 0.0 };
-    let sy = if my > 0.0 { max_move / my } else { 0.0 };
+    // Rounded as plc_client_os rounds them (`f / max · move`, edges `x ± w/2 + d`), so that the
+    // parity test compares the algorithms, not the association of their sums.
+    let norm = |f: f64, m: f64| if m > 0.0 { f / m * max_move } else { 0.0 };
     for k in hard..nobj {
         let [hw, hh] = s.half[k];
         let [fx, fy] = s.force[k];
         let p = &mut s.pos[k];
-        let nx = p[0] + fx * sx;
-        let ny = p[1] + fy * sy;
+        let (dx, dy) = (norm(fx, mx), norm(fy, my));
         // A move that would leave the canvas is cancelled on that axis.
-        if nx - hw > 0.0 && nx + hw < cw {
-            p[0] = nx;
+        if p[0] - hw + dx > 0.0 && p[0] + hw + dx < cw {
+            p[0] += dx;
         }
-        if ny - hh > 0.0 && ny + hh < ch {
-            p[1] = ny;
+        if p[1] - hh + dy > 0.0 && p[1] + hh + dy < ch {
+            p[1] += dy;
         }
     }
 }
@@ -494,18 +499,31 @@ fn repulsion(s: &mut FdScratch, (cw, ch): (f64, f64), mag: f64, max_soft: f64, h
             }
         }
     }
-    let pos = &s.pos[..];
+    let (bbox, node) = (&s.bbox[..], &s.node[..]);
+    // plc_client_os visits the pairs by node index (lower node outer, higher inner), so each
+    // object receives its pushes in increasing order of the other's node index; summed in that
+    // order they round as there.
+    s.pairs[..n].sort_unstable_by_key(|&[u, v]| {
+        let (a, b) = (node[u as usize], node[v as usize]);
+        (a.min(b), a.max(b))
+    });
     let force = &mut s.force[..];
     for &[u, v] in &s.pairs[..n] {
         let (u, v) = (u as usize, v as usize);
-        let (ddx, ddy) = (pos[u][0] - pos[v][0], pos[u][1] - pos[v][1]);
-        let d = (ddx * ddx + ddy * ddy).sqrt();
-        let r = mag / d;
-        let (fx, fy) = if d == 0.0 {
-            let c = -std::f64::consts::FRAC_1_SQRT_2 * mag;
+        // Centres as plc_client_os takes them, from the bounding boxes.
+        let (bu, bv) = (bbox[u], bbox[v]);
+        let ddx = (bu[0] + bu[2]) / 2.0 - (bv[0] + bv[2]) / 2.0;
+        let ddy = (bu[1] + bu[3]) / 2.0 - (bv[1] + bv[3]) / 2.0;
+        let (fx, fy) = if ddx == 0.0 && ddy == 0.0 {
+            // Same centre (every node starts at the canvas centre): the lower node index goes
+            // along (−1, −1)/√2, the other the opposite way.
+            // `1/√2` rounded as plc_client_os computes it (one ulp below FRAC_1_SQRT_2).
+            let c = mag * (1.0 / 2f64.sqrt());
+            let c = if node[u] < node[v] { -c } else { c };
             (c, c)
         } else {
-            (ddx * r, ddy * r)
+            let d = (ddx * ddx + ddy * ddy).sqrt();
+            (mag * (ddx / d), mag * (ddy / d))
         };
         // Obstacles' force slots absorb their share unread (cleared each step), so no branch.
         force[u][0] += fx;
