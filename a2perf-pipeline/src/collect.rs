@@ -23,106 +23,23 @@ use a2perf_core::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::stats::Summary;
-use super::train::PhaseSystem;
-use super::{
-    CHECKPOINT_DIR, CURVE_JSON, LoadedRun, PipelineError, PolicySource, RegistryPolicies, Result,
-    TRAIN_SYSTEM_FILE, located_rollout, progress,
+use crate::dataset::dataset_id;
+use crate::error::{PipelineError, Result, io_err};
+use crate::phase::PhaseSystem;
+use crate::rollout::located_rollout;
+use crate::run_dir::{
+    COLLECT_DIR, CURVE_JSON, EVALUATION_FILE, LoadedRun, PolicySource, RegistryPolicies,
+    TRAIN_SYSTEM_FILE,
 };
+use crate::stats::Summary;
+use crate::{minari, progress, stats};
 
-/// How a checkpoint's training sample cost is assigned.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum CostRule {
-    /// The training energy measured over the whole run, times the fraction of the run's
-    /// wall-clock time elapsed at the checkpoint (read from the training curve's clock).
-    Measured,
-    /// The original's rule: total energy × checkpoint step / last checkpoint step.
-    ProRata,
-}
-
-/// Expertise level of a checkpoint.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Level {
-    /// Low return.
-    Novice,
-    /// Around the mean.
-    Intermediate,
-    /// High return.
-    Expert,
-}
-
-impl Level {
-    /// `novice`, `intermediate` or `expert`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Level::Novice => "novice",
-            Level::Intermediate => "intermediate",
-            Level::Expert => "expert",
-        }
-    }
-}
-
-/// Assigns a level to a checkpoint's mean return given the mean `mu` and standard deviation
-/// `sigma` of all checkpoints' mean returns. The original code's rule (default): novice
-/// ≤ μ−2σ, intermediate within μ±σ, expert ≥ μ+2σ, others unassigned. With `one_sigma` (the
-/// paper's wording): novice < μ−σ, intermediate within μ±σ, expert > μ+σ.
-///
-/// ```
-/// use a2perf_pipeline::collect::{level_of, Level};
-/// assert_eq!(level_of(0.0, 5.0, 2.0, false), Some(Level::Novice));
-/// assert_eq!(level_of(2.0, 5.0, 2.0, false), None);
-/// assert_eq!(level_of(2.0, 5.0, 2.0, true), Some(Level::Novice));
-/// assert_eq!(level_of(3.5, 5.0, 2.0, false), Some(Level::Intermediate));
-/// assert_eq!(level_of(9.0, 5.0, 2.0, false), Some(Level::Expert));
-/// ```
-pub fn level_of(ret: f64, mu: f64, sigma: f64, one_sigma: bool) -> Option<Level> {
-    if one_sigma {
-        if ret < mu - sigma {
-            Some(Level::Novice)
-        } else if ret > mu + sigma {
-            Some(Level::Expert)
-        } else {
-            Some(Level::Intermediate)
-        }
-    } else if ret <= mu - 2.0 * sigma {
-        Some(Level::Novice)
-    } else if ret >= mu + 2.0 * sigma {
-        Some(Level::Expert)
-    } else if (mu - sigma..=mu + sigma).contains(&ret) {
-        Some(Level::Intermediate)
-    } else {
-        None
-    }
-}
-
-/// Options of [`collect`].
-#[derive(Clone, Debug)]
-pub struct CollectOptions {
-    /// Greedy episodes per checkpoint evaluation (the original: 100).
-    pub eval_episodes: usize,
-    /// Episodes per dataset.
-    pub dataset_episodes: usize,
-    /// Sample-cost rule.
-    pub cost: CostRule,
-    /// Use the one-σ level rule.
-    pub one_sigma: bool,
-    /// Show progress bars.
-    pub show_progress: bool,
-}
-
-impl Default for CollectOptions {
-    fn default() -> Self {
-        Self {
-            eval_episodes: 100,
-            dataset_episodes: 100,
-            cost: CostRule::Measured,
-            one_sigma: false,
-            show_progress: false,
-        }
-    }
-}
+// The dataset vocabulary and the run's checkpoint listing live with the plans and the run
+// directory; `collect::` still names them for the front ends.
+pub use crate::dataset::{
+    CollectOptions, CostRule, DATASET_INFO_FILE, DatasetInfo, Level, dataset_info_for, level_of,
+};
+pub use crate::run_dir::checkpoints;
 
 /// Evaluation of one checkpoint.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -143,38 +60,6 @@ pub struct CheckpointEval {
     pub level: Option<Level>,
 }
 
-/// A collected dataset (`a2perf_dataset.json`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DatasetInfo {
-    /// Dataset id, `<Env>-<level>-v0`.
-    pub dataset_id: String,
-    /// Directory.
-    pub path: PathBuf,
-    /// Task name.
-    pub task: String,
-    /// Environment id.
-    pub env_id: String,
-    /// Environment parameters.
-    pub env_params: BTreeMap<String, a2perf_core::Value>,
-    /// Level.
-    pub level: Level,
-    /// Episodes.
-    pub episodes: usize,
-    /// Steps (samples).
-    pub steps: usize,
-    /// Mean return of the episodes.
-    pub mean_return: f64,
-    /// Checkpoints the episodes were drawn from.
-    pub checkpoints: Vec<PathBuf>,
-    /// Training sample cost: mean training energy (kWh) of those checkpoints (as the original's
-    /// `training_sample_cost.txt`); `None` when energy was not measured.
-    pub training_sample_cost_kwh: Option<f64>,
-    /// How the cost was assigned.
-    pub cost_rule: CostRule,
-    /// Mean and std of all checkpoints' mean returns used for the levels.
-    pub level_mu_sigma: [f64; 2],
-}
-
 /// Outcome of [`collect`].
 #[derive(Clone, Debug, Default)]
 pub struct CollectSummary {
@@ -184,31 +69,6 @@ pub struct CollectSummary {
     pub datasets: Vec<DatasetInfo>,
     /// Levels with no checkpoint (no dataset written), per task.
     pub empty_levels: Vec<(String, Level)>,
-}
-
-/// Checkpoint files of a run, sorted by step.
-pub fn checkpoints(run: &Path) -> Result<Vec<(u64, PathBuf)>> {
-    let dir = run.join(CHECKPOINT_DIR);
-    let mut out = Vec::new();
-    if !dir.is_dir() {
-        return Ok(out);
-    }
-    for e in std::fs::read_dir(&dir).map_err(super::io_err(&dir))? {
-        let p = e.map_err(super::io_err(&dir))?.path();
-        let name = p
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        if let Some(step) = name
-            .strip_prefix("step_")
-            .and_then(|s| s.strip_suffix(".ckpt"))
-            .and_then(|s| s.parse::<u64>().ok())
-        {
-            out.push((step, p));
-        }
-    }
-    out.sort();
-    Ok(out)
 }
 
 fn energy_kwh(system: &PhaseSystem) -> Option<f64> {
@@ -237,30 +97,6 @@ fn wall_at(curve: &LearningCurve, steps: u64) -> Option<f64> {
         }
     }
     pts.last().map(|p| p.wall_seconds)
-}
-
-/// `<Env>[-<task suffix>]-<level>-v0`: the directory `collect` writes a task's dataset of one
-/// level to.
-pub(crate) fn dataset_id(task: &str, env_id: &str, level: Level) -> String {
-    let base = match env_id.rfind("-v") {
-        Some(i) if env_id[i + 2..].chars().all(|c| c.is_ascii_digit()) => &env_id[..i],
-        _ => env_id,
-    };
-    let extra: String = task
-        .strip_prefix(env_id)
-        .unwrap_or("")
-        .chars()
-        .filter_map(|c| match c {
-            c if c.is_ascii_alphanumeric() || c == '.' => Some(c),
-            '[' | ']' => None,
-            _ => Some('_'),
-        })
-        .collect();
-    if extra.is_empty() {
-        format!("{base}-{}-v0", level.name())
-    } else {
-        format!("{base}-{extra}-{}-v0", level.name())
-    }
 }
 
 /// Evaluates the checkpoints of `runs`, assigns levels per task and writes the datasets under
@@ -388,7 +224,7 @@ pub fn collect_levels(
             .iter()
             .flat_map(|(_, e)| e.iter().map(|c| c.returns.mean))
             .collect();
-        let mu = super::stats::mean(&means);
+        let mu = stats::mean(&means);
         let sigma = Summary::of(&means).std;
         for (_, evals) in &mut entries {
             for e in evals.iter_mut() {
@@ -396,9 +232,9 @@ pub fn collect_levels(
             }
         }
         for (run, evals) in &entries {
-            let dir = run.dir.join("collect");
-            std::fs::create_dir_all(&dir).map_err(super::io_err(&dir))?;
-            write_json_atomic(&dir.join("evaluation.json"), evals)?;
+            let dir = run.dir.join(COLLECT_DIR);
+            std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
+            write_json_atomic(&dir.join(EVALUATION_FILE), evals)?;
         }
         let first = &entries[0].0;
         for &level in levels {
@@ -450,14 +286,14 @@ fn write_dataset(
     let dir = out.join(&id);
     if dir.join(DATASET_INFO_FILE).is_file() {
         // Ours, from an earlier collect: replace it whole so no stale episode survives.
-        std::fs::remove_dir_all(&dir).map_err(super::io_err(&dir))?;
+        std::fs::remove_dir_all(&dir).map_err(io_err(&dir))?;
     } else if dir.read_dir().is_ok_and(|mut d| d.next().is_some()) {
         return Err(PipelineError::Invalid(format!(
             "{}: exists and was not written by `a2perf collect`; refusing to overwrite it",
             dir.display()
         )));
     }
-    std::fs::create_dir_all(&dir).map_err(super::io_err(&dir))?;
+    std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
     let mut env = run.make_env(registry)?;
     let spec = env.spec().clone();
     let mut rng = RngStream::new(0, &format!("collect/{task}/{}", level.name()));
@@ -490,7 +326,7 @@ fn write_dataset(
             || pool[k].1.checkpoint.display().to_string(),
         )?;
         returns.push(ep.episode_return);
-        let record = super::minari::EpisodeRecord {
+        let record = minari::EpisodeRecord {
             observations: ep
                 .transitions
                 .iter()
@@ -504,14 +340,14 @@ fn write_dataset(
             seed,
         };
         let data_dir = dir.join("data");
-        super::minari::write_episode(
+        minari::write_episode(
             &data_dir,
             e,
             &record,
             &spec.observation_space,
             &spec.action_space,
         )
-        .map_err(super::io_err(&data_dir))?;
+        .map_err(io_err(&data_dir))?;
         episodes.push(serde_json::json!({
             "id": e,
             "checkpoint": pool[k].1.checkpoint,
@@ -537,9 +373,9 @@ fn write_dataset(
         level,
         episodes: opts.dataset_episodes,
         steps: samples.len(),
-        mean_return: super::stats::mean(&returns),
+        mean_return: stats::mean(&returns),
         checkpoints: used,
-        training_sample_cost_kwh: costs.map(|c| super::stats::mean(&c)),
+        training_sample_cost_kwh: costs.map(|c| stats::mean(&c)),
         cost_rule: opts.cost,
         level_mu_sigma: mu_sigma,
     };
@@ -564,7 +400,7 @@ fn write_dataset(
         serde_json::to_value(&info).map_err(|e| PipelineError::Invalid(e.to_string()))?,
     );
     let data_dir = dir.join("data");
-    super::minari::write_metadata(
+    minari::write_metadata(
         &data_dir,
         &info.dataset_id,
         &spec.observation_space,
@@ -574,25 +410,6 @@ fn write_dataset(
         &run.record.algorithm.name,
         extra,
     )
-    .map_err(super::io_err(&data_dir))?;
+    .map_err(io_err(&data_dir))?;
     Ok(info)
-}
-
-/// `a2perf_dataset.json`.
-pub const DATASET_INFO_FILE: &str = "a2perf_dataset.json";
-
-/// Reads the provenance of the dataset holding `samples` (a `samples.json` path or its
-/// directory), if it was written by `collect`.
-pub fn dataset_info_for(samples: &Path) -> Result<Option<DatasetInfo>> {
-    let dir = if samples.is_dir() {
-        samples.to_path_buf()
-    } else {
-        samples.parent().map(Path::to_path_buf).unwrap_or_default()
-    };
-    let p = dir.join(DATASET_INFO_FILE);
-    if p.is_file() {
-        Ok(Some(read_json(&p)?))
-    } else {
-        Ok(None)
-    }
 }

@@ -51,15 +51,15 @@ use a2perf_core::{
     write_atomic, write_json_atomic,
 };
 
-use super::plan::{ExperimentPlan, RunJob, check_dir_name, from_experiment, path_safe};
-use super::run_lock::TrainingLock;
-use super::train::{
-    MeterFactory, MeteredPhase, Phase, PlannedRun, SegmentOutcome, Start, TrainSegment,
-    TrainSegments, prepare, wipe, write_curve, write_run_files, write_train_system,
+use crate::error::{PipelineError, Result, io_err};
+use crate::phase::{MeterFactory, MeteredPhase, Phase};
+use crate::plan::{ExperimentPlan, RunJob, check_dir_name, from_experiment, path_safe};
+use crate::run_dir::{
+    CHECKPOINT_DIR, ExternalAgent, PlannedRun, RunRecord, SegmentOutcome, Start,
+    TRAIN_SEGMENTS_FILE, TrainSegment, TrainSegments, prepare, wipe, write_curve, write_run_files,
+    write_train_system,
 };
-use super::{
-    CHECKPOINT_DIR, ExternalAgent, PipelineError, Result, RunRecord, TRAIN_SEGMENTS_FILE, io_err,
-};
+use crate::run_lock::TrainingLock;
 
 /// What a front end knows about an external run before it starts.
 #[derive(Clone, Debug, PartialEq)]

@@ -2,52 +2,17 @@
 //! suite (the one recorded in `run.json`: the config's, its profile's or the registry's for the
 //! domain), and their sum.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
-use a2perf_core::{ActMode, Registry, RngStream, Value, write_json_atomic};
-use serde::{Deserialize, Serialize};
+use a2perf_core::{ActMode, Registry, RngStream, write_json_atomic};
 
-use super::plan::{GeneralizationTask, SuiteSource};
-use super::{
-    GENERALIZATION_FILE, LoadedRun, POLICY_FILE, PipelineError, PolicySource, RegistryPolicies,
-    Result, located_rollout, progress,
-};
-
-/// Result on one task of the suite.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct TaskResult {
-    /// Task name.
-    pub name: String,
-    /// Environment id.
-    pub env_id: String,
-    /// Parameters that differ from the id's defaults.
-    pub params: BTreeMap<String, Value>,
-    /// Return of every rollout.
-    pub returns: Vec<f64>,
-    /// Mean return (`None` when the task could not be run; see `error`).
-    pub mean_return: Option<f64>,
-    /// Why the policy could not be run on this task (e.g. its observation does not fit).
-    pub error: Option<String>,
-}
-
-/// `generalization.json`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct GeneralizationResults {
-    /// Domain of the suite.
-    pub domain: String,
-    /// Where the suite came from (absent in files written before suites were configurable,
-    /// which always used the registry's).
-    #[serde(default)]
-    pub source: Option<SuiteSource>,
-    /// Rollouts per task.
-    pub episodes: usize,
-    /// Per-task results, in suite order.
-    pub tasks: Vec<TaskResult>,
-    /// Sum of the per-task mean returns (the paper's generalization score); `None` if any task
-    /// could not be run.
-    pub sum_of_mean_returns: Option<f64>,
-}
+// The result file's model belongs to the run directory; `generalize::` still names it.
+use crate::error::{PipelineError, Result};
+use crate::plan::{GeneralizationTask, SuiteSource};
+use crate::progress;
+use crate::rollout::located_rollout;
+use crate::run_dir::{GENERALIZATION_FILE, LoadedRun, POLICY_FILE, PolicySource, RegistryPolicies};
+pub use crate::run_dir::{GeneralizationResults, TaskResult};
 
 /// Rolls the final policy of a complete run out on every task of its generalization suite and
 /// writes `generalization.json`. The suite is the one `run.json` records; a run recorded without

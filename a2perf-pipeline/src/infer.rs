@@ -7,16 +7,18 @@ use a2perf_core::{
     ActMode, Env, Observation, Policy, Registry, RngStream, Space, Step, Tensor, write_atomic,
     write_json_atomic,
 };
-use serde::{Deserialize, Serialize};
 
-use super::meters::INFERENCE_EMISSIONS_FILE;
-use super::plan::ObservationSource;
-use super::stats::Summary;
-use super::train::{MeterFactory, Phase, PhaseSystem, measured, no_meters};
-use super::{
-    INFERENCE_FILE, LoadedRun, POLICY_FILE, PipelineError, PolicySource, RegistryPolicies, Result,
-    io_err, progress,
+// The result file's model belongs to the run directory; `infer::` still names it.
+use crate::error::{PipelineError, Result, io_err};
+use crate::phase::{MeterFactory, Phase, measured, no_meters};
+use crate::plan::ObservationSource;
+use crate::progress;
+pub use crate::run_dir::InferenceResults;
+use crate::run_dir::{
+    INFERENCE_EMISSIONS_FILE, INFERENCE_FILE, LoadedRun, POLICY_FILE, PolicySource,
+    RegistryPolicies,
 };
+use crate::stats::Summary;
 
 /// Options of [`infer_run`]; `None` fields take the run's recorded settings.
 #[derive(Clone)]
@@ -43,33 +45,6 @@ impl Default for InferOptions {
             show_progress: false,
         }
     }
-}
-
-/// `inference.json`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct InferenceResults {
-    /// Greedy rollouts run.
-    pub episodes: usize,
-    /// Return of every rollout (undiscounted sum of rewards).
-    pub rollout_returns: Vec<f64>,
-    /// Summary of `rollout_returns`.
-    pub returns: Summary,
-    /// Length of every rollout.
-    pub episode_lengths: Vec<usize>,
-    /// Per-call inference time in milliseconds on the configured observations (the figure the
-    /// report uses).
-    pub inference_time_ms: Summary,
-    /// Which observations `inference_time_ms` was measured on.
-    pub observation_source: ObservationSource,
-    /// Time of every `Policy::act` call made during the rollouts, in milliseconds.
-    pub rollout_call_time_ms: Summary,
-    /// Time of each call on random observation-space samples (the original harness's method),
-    /// in milliseconds, when requested.
-    pub random_observation_time_ms: Option<Summary>,
-    /// Random samples on which the policy returned an error (e.g. no legal action).
-    pub random_observation_failures: usize,
-    /// RAM, power and energy over the rollouts.
-    pub system: PhaseSystem,
 }
 
 /// Draws an observation from `space` (each box in its element type, see

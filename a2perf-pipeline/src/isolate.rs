@@ -17,8 +17,8 @@ use std::time::Duration;
 
 use a2perf_core::{CancelToken, RunDir};
 
-use crate::train::{RunOutcome, RunReport};
-use crate::{PipelineError, Result};
+use crate::error::{PipelineError, Result};
+use crate::outcome::{RunOutcome, RunReport};
 
 /// What a child process is asked to do, for a [`ChildCommand`] to turn into a command line.
 #[derive(Clone, Copy, Debug)]

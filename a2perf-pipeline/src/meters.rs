@@ -10,13 +10,9 @@ use std::time::Duration;
 use a2perf_core::{Meter, MeterError, MeterReport};
 use a2perf_metrics::system::{SystemMeter, SystemMeterConfig, append_emissions_csv};
 
-use super::plan::MetricSettings;
-use super::train::{MeterFactory, Phase};
+use crate::phase::{MeterFactory, MetricSettings, Phase};
 
-/// The CodeCarbon-style row of each training segment, in the run directory.
-pub const TRAIN_EMISSIONS_FILE: &str = "train_emissions.csv";
-/// The CodeCarbon-style row of each `infer`, in the run directory.
-pub const INFERENCE_EMISSIONS_FILE: &str = "inference_emissions.csv";
+pub use crate::run_dir::{INFERENCE_EMISSIONS_FILE, TRAIN_EMISSIONS_FILE};
 
 /// A [`SystemMeter`] that writes its emissions row next to the run's results when it finishes.
 pub struct RunSystemMeter {

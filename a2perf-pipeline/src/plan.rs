@@ -8,7 +8,9 @@ use std::sync::Arc;
 use a2perf_core::{TrainingSettings, Value};
 use serde::{Deserialize, Serialize};
 
-use super::{DatasetProvenance, PipelineError, Result};
+use crate::dataset::{self, CollectOptions, CostRule, DatasetProvenance, Level};
+use crate::error::{PipelineError, Result, io_err};
+use crate::phase::MetricSettings;
 
 /// A task: an environment id with its parameters, under a short name used in run directories.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -179,33 +181,6 @@ impl From<&a2perf_core::TaskRef> for GeneralizationTask {
             name: t.name.clone(),
             env_id: t.env_id.clone(),
             params: t.params.clone(),
-        }
-    }
-}
-
-/// Settings of the system meters and of the statistics (from the config's `metrics` section).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct MetricSettings {
-    /// Seconds between RAM samples.
-    pub ram_sample_interval_s: f64,
-    /// Grid carbon intensity, g CO2-eq per kWh.
-    pub carbon_intensity_g_per_kwh: f64,
-    /// `auto`, `rapl` or `estimate`.
-    pub energy_method: String,
-    /// `a2perf` or `chan2019`.
-    pub reliability_definition: String,
-    /// Bootstrap resamples for confidence intervals.
-    pub bootstrap_reps: usize,
-}
-
-impl Default for MetricSettings {
-    fn default() -> Self {
-        Self {
-            ram_sample_interval_s: 1.0,
-            carbon_intensity_g_per_kwh: 475.0,
-            energy_method: "auto".into(),
-            reliability_definition: "a2perf".into(),
-            bootstrap_reps: 50_000,
         }
     }
 }
@@ -402,7 +377,7 @@ pub fn from_experiment(
     };
     plan.metrics = metrics;
     if let Some(path) = algo.params.get("dataset").and_then(Value::as_str) {
-        plan.dataset = super::collect::dataset_info_for(std::path::Path::new(path))?
+        plan.dataset = dataset::dataset_info_for(std::path::Path::new(path))?
             .map(|info| DatasetProvenance::from_info(&info, path));
     }
     plan.operative = Some(Arc::new(move |dir: &std::path::Path| {
@@ -679,8 +654,7 @@ fn default_cost() -> String {
 
 impl DatasetStep {
     /// The level, checked.
-    pub fn level(&self) -> Result<super::collect::Level> {
-        use super::collect::Level;
+    pub fn level(&self) -> Result<Level> {
         match self.level.as_str() {
             "novice" => Ok(Level::Novice),
             "intermediate" => Ok(Level::Intermediate),
@@ -692,8 +666,7 @@ impl DatasetStep {
     }
 
     /// The options `collect` runs with.
-    pub fn collect_options(&self) -> Result<super::collect::CollectOptions> {
-        use super::collect::{CollectOptions, CostRule};
+    pub fn collect_options(&self) -> Result<CollectOptions> {
         let cost = match self.cost.as_str() {
             "measured" => CostRule::Measured,
             "pro_rata" => CostRule::ProRata,
@@ -797,7 +770,7 @@ pub fn load_plans(
         Ok(plan)
     };
     for path in paths {
-        let text = std::fs::read_to_string(path).map_err(super::io_err(path))?;
+        let text = std::fs::read_to_string(path).map_err(io_err(path))?;
         if looks_like_suite(&text) {
             let suite: Suite = ron::Options::default()
                 .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
@@ -942,7 +915,7 @@ fn dataset_source(
     }
     let out = exp.output.dir.join(&exp.name).join("datasets");
     let samples = out
-        .join(super::collect::dataset_id(&task.name, &task.env_id, level))
+        .join(dataset::dataset_id(&task.name, &task.env_id, level))
         .join("samples.json");
     Ok(DatasetSource {
         step: step.clone(),

@@ -29,61 +29,10 @@ use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use serde::{Deserialize, Serialize};
+use crate::error::{PipelineError, Result, io_err};
 
-use super::{PipelineError, Result, io_err};
-
-/// `train.lock`: the lock file of a run directory (see the [module documentation](self)).
-pub const TRAIN_LOCK_FILE: &str = "train.lock";
-
-/// The process that holds a run directory's training lock, as it recorded itself.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct LockHolder {
-    /// Its process id.
-    pub pid: u32,
-    /// The host it runs on.
-    pub host: String,
-}
-
-impl LockHolder {
-    /// This process.
-    pub fn current() -> Self {
-        Self {
-            pid: std::process::id(),
-            host: sysinfo::System::host_name().unwrap_or_else(|_| "unknown host".into()),
-        }
-    }
-}
-
-impl std::fmt::Display for LockHolder {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "pid {} on {}", self.pid, self.host)
-    }
-}
-
-/// A run directory left alone because another trainer holds its lock.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct LockedRun {
-    /// The run directory.
-    pub run: PathBuf,
-    /// The holder, as it recorded itself (`None` when it had not yet done so).
-    pub holder: Option<LockHolder>,
-}
-
-impl std::fmt::Display for LockedRun {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let who = match &self.holder {
-            Some(h) => format!("another trainer ({h})"),
-            None => "another trainer (it has not recorded its pid and host yet)".into(),
-        };
-        write!(
-            f,
-            "{}: skipped: {who} holds its training lock ({TRAIN_LOCK_FILE}); run the same \
-             command again once that process has stopped",
-            self.run.display()
-        )
-    }
-}
+// The lock's vocabulary is on the ground floor, since errors carry it.
+pub use crate::error::{LockHolder, LockedRun, TRAIN_LOCK_FILE};
 
 /// The exclusive training lock of one run directory, held until dropped (or the process ends).
 #[derive(Debug)]
