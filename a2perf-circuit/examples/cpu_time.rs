@@ -10,7 +10,7 @@ use std::time::Instant;
 use a2perf_circuit::placer::{FdSchedule, FdScratch, place_std_cells};
 use a2perf_circuit::{
     CircuitEnv, CircuitEnvConfig, CostSettings, GeneratorConfig, Netlist, Placement, PlacementCost,
-    SoftMacroRule, generate,
+    SoftMacroRule, StdCellPlacer, generate,
 };
 use a2perf_core::{Action, Env, Observation, RngStream, Step};
 
@@ -98,7 +98,11 @@ fn main() {
         ),
     ] {
         let config = CircuitEnvConfig {
-            std_cell_placement: fd,
+            std_cell_placer: if fd {
+                StdCellPlacer::Fd
+            } else {
+                StdCellPlacer::None
+            },
             ..Default::default()
         };
         let mut env = CircuitEnv::new(&netlist, Some(&placement), settings.clone(), config)

@@ -4,7 +4,7 @@
 //! ours is a re-implementation, so the best return any agent can reach here may differ. This
 //! measures that ceiling under the A2Perf-compatible profile's switches (`configs/paper/
 //! profile.ron`: infeasible reward −1 with auto-reset, CT's congestion grid, the padded 128×128
-//! action space):
+//! action space, the analytical `dreamplace` standard-cell placer):
 //!
 //! - `toy`: every legal placement of the toy netlist's macros, enumerated exhaustively (the toy
 //!   has 2 hard macros on a 20×10 grid): best, median and worst episode return.
@@ -41,6 +41,7 @@ fn profile_params(netlist: &Path) -> BTreeMap<String, Value> {
         ("padded_action".into(), Value::Bool(true)),
         ("initial_locations".into(), Value::Str("fd".into())),
         ("soft_macros_placed".into(), Value::Bool(false)),
+        ("std_cell_placer".into(), Value::Str("dreamplace".into())),
     ])
 }
 

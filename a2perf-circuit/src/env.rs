@@ -5,9 +5,23 @@
 //! fixed macros excluded). The action is a placement-grid cell (`Discrete{cols·rows}`,
 //! `cell = row·cols + col`) or, with `padded_action`, A2Perf's padded 128×128 layout
 //! ([`cell_to_padded_action`]; the padding is always masked). The macro's centre goes to the cell
-//! centre. Reward is 0 until the last macro; then soft macros and standard cells are placed by our
-//! force-directed placer ([`crate::placer`], from the canvas centre whatever their current
-//! positions, as circuit_training's `use_current_loc=False`) and the reward is `−proxy_cost`.
+//! centre. Reward is 0 until the last macro; then soft macros and standard cells are placed by the
+//! standard-cell placer (`std_cell_placer`) and the reward is `−proxy_cost`:
+//!
+//! - `fd` (default, the original's): our force-directed placer ([`crate::placer`], from the
+//!   canvas centre whatever their current positions, as circuit_training's
+//!   `use_current_loc=False`);
+//! - `dreamplace` (A2Perf's baselines): our analytical placer with circuit_training's
+//!   DREAMPlace parameters ([`crate::analytical`]), from their current positions (the
+//!   initial locations), placed hard macros fixed;
+//! - `none`: they stay where they are.
+//!
+//! In `dreamplace` mode a macro left without a legal cell ends the episode as circuit_training
+//! does: the remaining hard macros are placed analytically with the soft macros and standard
+//! cells (mixed-size, then marked placed), the reward is the real `−proxy_cost` (not
+//! `infeasible_reward`), `info` has the real costs and `infeasible = 1`, and
+//! `infeasible_auto_reset` decides, as below, between the reset observation (A2Perf's fork,
+//! which resets in this mode too) and the final state (`step` then asks for a `reset`).
 //!
 //! If a macro has no legal cell left the episode terminates with reward `infeasible_reward`, by
 //! default [`INFEASIBLE_REWARD`] = −4.0 (circuit_training's current value). A2Perf's fork uses
@@ -23,9 +37,10 @@
 //! `wirelength_hpwl`, `infeasible`.
 //!
 //! # Initial locations
-//! As A2Perf's `CircuitEnv.__init__`, the constructor runs a mixed-size force-directed placement
-//! of every movable node, hard macros included ([`FdSchedule::mixed_size`]; our placer, Google's
-//! is closed). Its result is what the observation shows for a macro until the agent places it, and
+//! As A2Perf's `CircuitEnv.__init__`, the constructor runs a mixed-size placement of every
+//! movable node, hard macros included: force-directed ([`FdSchedule::mixed_size`]; our placer,
+//! Google's is closed), or in `dreamplace` mode the analytical placer with every hard macro
+//! movable (circuit_training's `update_num_non_movable_macros(0)`). Its result is what the observation shows for a macro until the agent places it, and
 //! where soft macros and standard cells sit during the episode. `initial_locations = "plc"` keeps
 //! the positions of the `.plc` (or the generator) instead.
 //!
@@ -65,6 +80,9 @@ use a2perf_core::{
     Params, Registry, Space, Step, TaskRef, Tensor, Value,
 };
 
+use crate::analytical::{
+    AnalyticalParams, AnalyticalScratch, MovableMacros, check_capacity, place_analytical,
+};
 use crate::cost::{CostSettings, CostWeights, PlacementCost};
 use crate::generator::{GeneratorConfig, generate};
 use crate::netlist::{Netlist, NodeKind, SoftMacroRule};
@@ -178,6 +196,35 @@ impl InitialLocations {
     }
 }
 
+/// The standard-cell placer run at the end of an episode (parameter `std_cell_placer`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum StdCellPlacer {
+    /// Our force-directed placer with circuit_training's schedule (`fd`, the original's
+    /// default).
+    #[default]
+    Fd,
+    /// Our analytical placer with circuit_training's DREAMPlace parameters (`dreamplace`,
+    /// what A2Perf's baselines name): [`crate::analytical`].
+    DreamPlace,
+    /// None: soft macros and standard cells stay where they are (`none`).
+    None,
+}
+
+impl StdCellPlacer {
+    /// The parameter value naming this choice.
+    ///
+    /// ```
+    /// assert_eq!(a2perf_circuit::StdCellPlacer::DreamPlace.name(), "dreamplace");
+    /// ```
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Fd => "fd",
+            Self::DreamPlace => "dreamplace",
+            Self::None => "none",
+        }
+    }
+}
+
 /// Options of a [`CircuitEnv`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct CircuitEnvConfig {
@@ -185,10 +232,12 @@ pub struct CircuitEnvConfig {
     pub id: String,
     /// Use A2Perf's padded 128×128 action layout.
     pub padded_action: bool,
-    /// Run the force-directed placer at the end of an episode.
-    pub std_cell_placement: bool,
-    /// The placer's schedule.
+    /// The standard-cell placer at the end of an episode.
+    pub std_cell_placer: StdCellPlacer,
+    /// The force-directed placer's schedule.
     pub fd_schedule: FdSchedule,
+    /// The analytical placer's parameters.
+    pub analytical: AnalyticalParams,
     /// Proxy weights.
     pub weights: CostWeights,
     /// Reward of an episode that ends because a macro has no legal cell left.
@@ -208,8 +257,9 @@ impl Default for CircuitEnvConfig {
         Self {
             id: "CircuitTraining-Custom-v0".into(),
             padded_action: false,
-            std_cell_placement: true,
+            std_cell_placer: StdCellPlacer::Fd,
             fd_schedule: FdSchedule::default(),
+            analytical: AnalyticalParams::circuit_training(),
             weights: CostWeights::default(),
             infeasible_reward: INFEASIBLE_REWARD,
             infeasible_auto_reset: false,
@@ -249,6 +299,7 @@ pub struct CircuitEnv {
     needs_reset: bool,
     mask: Vec<bool>,
     fd: FdScratch,
+    analytical: AnalyticalScratch,
     static_tensors: Vec<Tensor>,
     // Scratch.
     dens: Vec<f64>,
@@ -450,10 +501,13 @@ impl CircuitEnv {
         );
         metadata.insert(
             "std_cell_placer".into(),
-            if config.std_cell_placement {
-                "a2perf-circuit force-directed (ours), CT schedule".into()
-            } else {
-                "none".into()
+            match config.std_cell_placer {
+                StdCellPlacer::Fd => "a2perf-circuit force-directed (ours), CT schedule".into(),
+                StdCellPlacer::DreamPlace => format!(
+                    "a2perf-circuit analytical (ours), CT DREAMPlace parameters: {}",
+                    serde_json::to_string(&config.analytical).unwrap_or_default()
+                ),
+                StdCellPlacer::None => "none".into(),
             },
         );
         metadata.insert(
@@ -510,8 +564,28 @@ impl CircuitEnv {
             block_counts[b] += 1;
         }
         let mut fd = FdScratch::default();
+        let mut analytical = AnalyticalScratch::default();
+        if config.std_cell_placer == StdCellPlacer::DreamPlace {
+            check_capacity(&cost, config.analytical.target_density).map_err(|e| {
+                EnvError::BadFile {
+                    path: netlist.name.clone(),
+                    reason: e.to_string(),
+                }
+            })?;
+        }
         if config.initial_locations == InitialLocations::MixedSizeFd {
-            place_std_cells(&mut cost, &FdSchedule::mixed_size(), &mut fd);
+            // circuit_training runs its end-of-episode placer once in mixed-size mode.
+            if config.std_cell_placer == StdCellPlacer::DreamPlace {
+                place_analytical(
+                    &mut cost,
+                    &config.analytical,
+                    MovableMacros::All,
+                    &mut analytical,
+                )
+                .map_err(|e| bad_param("std_cell_placer", e.to_string()))?;
+            } else {
+                place_std_cells(&mut cost, &FdSchedule::mixed_size(), &mut fd);
+            }
         }
         let base_x = (0..n).map(|i| cost.position(i).0).collect();
         let base_y = (0..n).map(|i| cost.position(i).1).collect();
@@ -528,6 +602,7 @@ impl CircuitEnv {
             current: 0,
             needs_reset: true,
             fd,
+            analytical,
             static_tensors,
             dens: Vec::new(),
             xcost: vec![0.0; cols],
@@ -571,6 +646,32 @@ impl CircuitEnv {
         } else {
             cell
         }
+    }
+
+    /// Runs the analytical placer on the current placement.
+    fn place_analytically(&mut self, macros: MovableMacros) -> Result<(), EnvError> {
+        place_analytical(
+            &mut self.cost,
+            &self.config.analytical,
+            macros,
+            &mut self.analytical,
+        )
+        .map(|_| ())
+        .map_err(|e| EnvError::Backend(format!("analytical placer: {e}")))
+    }
+
+    /// The terminal reward and info of a placement whose cost is computed.
+    fn finish(&mut self, out: &mut Step, infeasible: bool) {
+        let c = self.cost.costs();
+        out.reward = -c.proxy_cost;
+        out.terminated = true;
+        out.info.set("wirelength", c.wirelength_cost);
+        out.info.set("density", c.density_cost);
+        out.info.set("congestion", c.congestion_cost);
+        out.info.set("proxy", c.proxy_cost);
+        out.info.set("wirelength_hpwl", c.wirelength);
+        out.info
+            .set("infeasible", if infeasible { 1.0 } else { 0.0 });
     }
 
     /// Puts every macro to place back at its initial location, unplaced, at the first step.
@@ -832,19 +933,17 @@ impl Env for CircuitEnv {
         out.info.clear();
         out.truncated = false;
         if self.current == self.order.len() {
-            if self.config.std_cell_placement {
-                place_std_cells(&mut self.cost, &self.config.fd_schedule, &mut self.fd);
+            match self.config.std_cell_placer {
+                StdCellPlacer::Fd => {
+                    place_std_cells(&mut self.cost, &self.config.fd_schedule, &mut self.fd);
+                }
+                StdCellPlacer::DreamPlace => {
+                    self.place_analytically(MovableMacros::None)?;
+                }
+                StdCellPlacer::None => {}
             }
-            let c = self.cost.costs();
-            out.reward = -c.proxy_cost;
-            out.terminated = true;
+            self.finish(out, false);
             self.needs_reset = true;
-            out.info.set("wirelength", c.wirelength_cost);
-            out.info.set("density", c.density_cost);
-            out.info.set("congestion", c.congestion_cost);
-            out.info.set("proxy", c.proxy_cost);
-            out.info.set("wirelength_hpwl", c.wirelength);
-            out.info.set("infeasible", 0.0);
             self.write_obs(&mut out.observation);
             return Ok(());
         }
@@ -852,6 +951,19 @@ impl Env for CircuitEnv {
         if self.mask.iter().any(|m| *m) {
             out.reward = -0.0;
             out.terminated = false;
+        } else if self.config.std_cell_placer == StdCellPlacer::DreamPlace {
+            // circuit_training's DREAMPlace mode: the remaining hard macros are placed with
+            // the soft macros and standard cells (mixed-size), and the real cost is the reward.
+            self.place_analytically(MovableMacros::Unplaced)?;
+            self.finish(out, true);
+            self.current = self.order.len();
+            if self.config.infeasible_auto_reset {
+                out.truncated = true;
+                self.restart();
+            } else {
+                self.needs_reset = true;
+            }
+            self.write_obs(&mut out.observation);
         } else {
             out.reward = self.config.infeasible_reward;
             out.terminated = true;
@@ -907,9 +1019,9 @@ fn common_params() -> Vec<ParamSpec> {
         ),
         ParamSpec::new(
             "std_cell_placer",
-            ParamKind::Choice(&["fd", "none"]),
+            ParamKind::Choice(&["fd", "dreamplace", "none"]),
             Value::Str("fd".into()),
-            "standard-cell placement at episode end (fd = our force-directed placer)",
+            "standard-cell placement at episode end: fd = our force-directed placer with circuit_training's schedule (the original's default); dreamplace = our analytical placer with circuit_training's DREAMPlace parameters (A2Perf's baselines), which also places the remaining hard macros when one is left without a legal cell (the episode then ends with the real cost, infeasible_reward unused) and runs the mixed-size placement at construction; none = no placement",
         ),
         ParamSpec::new(
             "wirelength_weight",
@@ -1014,8 +1126,13 @@ fn config_from(
     Ok(CircuitEnvConfig {
         id: id.to_string(),
         padded_action: p.bool("padded_action").map_err(perr)?,
-        std_cell_placement: p.str("std_cell_placer").map_err(perr)? == "fd",
+        std_cell_placer: match p.str("std_cell_placer").map_err(perr)? {
+            "dreamplace" => StdCellPlacer::DreamPlace,
+            "none" => StdCellPlacer::None,
+            _ => StdCellPlacer::Fd,
+        },
         fd_schedule: FdSchedule::default(),
+        analytical: AnalyticalParams::circuit_training(),
         weights,
         infeasible_reward: infeasible_reward(p)?,
         infeasible_auto_reset: p.bool("infeasible_auto_reset").map_err(perr)?,
@@ -1078,12 +1195,19 @@ fn file_env(id: &str, p: &Params) -> Result<Box<dyn Env>, EnvError> {
     };
     let mut settings = CostSettings::ct_env(&netlist, init.as_ref().map(|p| &p.header));
     let config = config_from(id, p, &mut settings)?;
-    Ok(Box::new(CircuitEnv::new(
-        &netlist,
-        init.as_ref(),
-        settings,
-        config,
-    )?))
+    // Errors about the netlist's contents name the file it came from.
+    let env = CircuitEnv::new(&netlist, init.as_ref(), settings, config).map_err(|e| match e {
+        EnvError::BadFile { reason, .. } => EnvError::BadFile {
+            path: path.to_string(),
+            reason,
+        },
+        EnvError::InvalidParameter { name, reason } if name == "settings" => EnvError::BadFile {
+            path: path.to_string(),
+            reason: format!("settings from the netlist and placement: {reason}"),
+        },
+        other => other,
+    })?;
+    Ok(Box::new(env))
 }
 
 fn synthetic_env(

@@ -8,6 +8,8 @@
 //!   incremental updates when one node moves, and the legality mask (which honours `.plc`
 //!   blockages; they do not enter the costs, as in the reference).
 //! - [`placer`]: a deterministic force-directed standard-cell placer (ours; Google's is closed).
+//! - [`analytical`]: a deterministic analytical global placer (ours) with circuit_training's
+//!   DREAMPlace parameters: Nesterov, weighted-average wirelength, electrostatic density.
 //! - [`generator`]: seeded synthetic netlists for tasks that need no files.
 //! - [`env`](mod@env): the `CircuitTraining-*` environments and [`register`].
 //! - [`render`]: an SVG picture of a placement.
@@ -20,12 +22,13 @@
 //! assert!(c.wirelength_cost > 0.0 && c.proxy_cost.is_finite());
 //! ```
 //!
-//! It deliberately does not reproduce Google's closed standard-cell placer or DREAMPlace, so
-//! episode rewards are ours; the cost function itself matches the reference exactly. It does not
+//! It deliberately does not reproduce Google's closed standard-cell placer or DREAMPlace itself
+//! (ours follow their published schedules and parameters), so episode rewards are ours; the cost function itself matches the reference exactly. It does not
 //! read the real CT Ariane netlist (unavailable); `CircuitTraining-Ariane-v0` takes it as a file.
 
 #![warn(missing_docs)]
 
+pub mod analytical;
 pub mod cost;
 pub mod env;
 pub mod generator;
@@ -35,7 +38,7 @@ pub mod plc;
 pub mod render;
 
 pub use cost::{CostBreakdown, CostError, CostSettings, CostWeights, PlacementCost};
-pub use env::{CircuitEnv, CircuitEnvConfig, InitialLocations, register};
+pub use env::{CircuitEnv, CircuitEnvConfig, InitialLocations, StdCellPlacer, register};
 pub use generator::{GeneratedCircuit, GeneratorConfig, generate};
 pub use netlist::{
     AttrValue, Net, Netlist, NetlistError, Node, NodeKind, Orientation, SoftMacroRule,
