@@ -9,14 +9,14 @@
 use std::sync::Arc;
 
 use a2perf_core::{
-    Action, Algorithm, Control, ParamKind, ParamSpec, Params, Policy, RunError, TrainingContext,
-    Value,
+    Action, Algorithm, Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError,
+    TrainingContext, Value,
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
 use crate::common::*;
 use crate::dataset::{DatasetError, DatasetLoader, JsonDatasetFile};
-use crate::model::NetOptions;
+use crate::model::{DiscreteNet, GaussianArch, NetOptions};
 use crate::nn::dist::{gaussian, masked};
 use crate::nn::optim::{Adam, LrSchedule};
 use crate::nn::{MlpWs, clip_grad_norm, ensure};
@@ -206,17 +206,65 @@ impl Algorithm for Bc {
         let spec = ctx.make_env(0)?.spec().clone();
         let layout = ObsLayout::from_spec(&spec)?;
         let head = head_for(&spec, &layout, &cfg.net, false)?;
-        let act_dim = match &head {
+        let demos = Demonstrations::load(loader.as_ref(), &spec, &layout, &head)?;
+        let params = initial_params(&head, &mut ctx.rng("bc/init"), cfg.init_log_std)?;
+        let mut obs_norm = if cfg.normalize_observations {
+            ObsNorm::for_head(&head, &layout)
+        } else {
+            None
+        };
+        let normalised = match &mut obs_norm {
+            Some(norm) => demos.normalised_tensors(norm, &layout),
+            None => Vec::new(),
+        };
+        let mut policy = NetPolicy::new("bc", &spec, head, params, obs_norm, ctx.seed())?;
+        let mut run = BcRun::new(cfg, layout, demos, normalised, &policy, ctx);
+        if let Some(bytes) = &resume {
+            run.restore(bytes, &mut policy)?;
+        }
+        loop {
+            run.step(&mut policy)?;
+            let save = |p: &NetPolicy| Ok(run.save_state(p));
+            if ctx.progress_resumable(run.samples, &mut policy, save)? == Control::Stop {
+                break;
+            }
+        }
+        check_finite("BC parameters", &policy.params)?;
+        ctx.finish(run.samples, &mut policy)?;
+        Ok(Box::new(policy))
+    }
+}
+
+/// The demonstrations as BC reads them: their observations, compact and exact (see
+/// `obs_store`: a netlist's adjacency is kept once, token ids in a byte or two, masks in bits;
+/// sample `i` is slot `i`), and their actions.
+struct Demonstrations {
+    store: ObsStore,
+    act_d: Vec<usize>,
+    act_c: Vec<f32>,
+    /// Number of samples.
+    n: usize,
+    /// Fingerprint of the observations and actions (see [`fingerprint`]).
+    fingerprint: u64,
+}
+
+impl Demonstrations {
+    /// The samples of `loader` for `spec`, checked against its spaces. The loader hands them
+    /// over one at a time (a JSON file is parsed as it is read), so the dataset is never held
+    /// whole beside the store.
+    fn load(
+        loader: &dyn DatasetLoader,
+        spec: &EnvSpec,
+        layout: &ObsLayout,
+        head: &Head,
+    ) -> Result<Self, RunError> {
+        let act_dim = match head {
             Head::Gaussian(g) => g.act_dim,
             _ => 0,
         };
         let n_actions = layout.num_actions.unwrap_or(0);
-        // The demonstrations' observations, compact and exact (see `obs_store`: a netlist's
-        // adjacency is kept once, token ids in a byte or two, masks in bits); sample `i` is slot
-        // `i`. The loader hands the samples over one at a time (a JSON file is parsed as it is
-        // read), so the dataset is never held whole beside the store.
-        let mut store = ObsStore::new(&layout);
-        let mut row = ObsBatch::new(&layout);
+        let mut store = ObsStore::new(layout);
+        let mut row = ObsBatch::new(layout);
         row.resize(1);
         let (mut act_d, mut act_c) = (Vec::new(), Vec::new());
         let mismatch = |reason: String| DatasetError::Mismatch {
@@ -224,7 +272,7 @@ impl Algorithm for Bc {
             reason,
         };
         let n = loader
-            .for_each_sample(&spec, &mut |s| {
+            .for_each_sample(spec, &mut |s| {
                 let i = act_d.len();
                 row.write_row(0, &s.observation)
                     .map_err(|e| mismatch(format!("sample {i}: {e}")))?;
@@ -255,149 +303,224 @@ impl Algorithm for Bc {
         if n == 0 {
             return Err(data_err(mismatch("the dataset is empty".into())));
         }
-        let data_fingerprint = fingerprint(&store, &layout, &act_d, &act_c);
-        let mut init_rng = ctx.rng("bc/init");
-        let params = match &head {
-            Head::Discrete(net) => net.init_params(&mut init_rng),
-            Head::Gaussian(g) => g.init_params(&mut init_rng, cfg.init_log_std),
-            Head::Squashed(_) => return Err(RunError::Unsupported("squashed head".into())),
+        let fingerprint = fingerprint(&store, layout, &act_d, &act_c);
+        Ok(Self {
+            store,
+            act_d,
+            act_c,
+            n,
+            fingerprint,
+        })
+    }
+
+    /// The tensors `norm` normalises (`[n, dim]` each), decoded and normalised once with the
+    /// dataset's statistics, which `norm` takes here: minibatches read them from here, every
+    /// other tensor from the store.
+    fn normalised_tensors(&self, norm: &mut ObsNorm, layout: &ObsLayout) -> Vec<(usize, Vec<f32>)> {
+        let n = self.n;
+        let mut row = ObsBatch::new(layout);
+        row.resize(1);
+        let mut normalised = Vec::new();
+        for (&t, stats) in norm.tensors.iter().zip(norm.stats.iter_mut()) {
+            let d = layout.dim(t);
+            let mut all = vec![0.0f32; n * d];
+            for (slot, dst) in all.chunks_exact_mut(d.max(1)).enumerate() {
+                self.store.read_tensor(slot, t, &mut row, 0);
+                dst.copy_from_slice(row.tensor_row(t, 0));
+            }
+            stats.update(&all, n);
+            for r in all.chunks_exact_mut(d.max(1)) {
+                stats.apply(r);
+            }
+            normalised.push((t, all));
+        }
+        normalised
+    }
+}
+
+/// Everything a BC run updates besides the policy: the optimiser, the minibatch stream, the
+/// samples drawn, and the demonstrations with the workspaces of a step.
+struct BcRun {
+    cfg: BcConfig,
+    layout: ObsLayout,
+    demos: Demonstrations,
+    /// See [`Demonstrations::normalised_tensors`].
+    normalised: Vec<(usize, Vec<f32>)>,
+    n_actions: usize,
+    act_dim: usize,
+    adam: Adam,
+    grads: Vec<f32>,
+    rng: RngStream,
+    mb: ObsBatch,
+    idx: Vec<usize>,
+    x: Vec<f32>,
+    ws: MlpWs,
+    dl: Vec<f32>,
+    lp: Vec<f32>,
+    dlog_std: Vec<f32>,
+    total: u64,
+    /// Dataset samples drawn so far (BC's budget and curve axis).
+    samples: u64,
+}
+
+impl BcRun {
+    fn new(
+        cfg: BcConfig,
+        layout: ObsLayout,
+        demos: Demonstrations,
+        normalised: Vec<(usize, Vec<f32>)>,
+        policy: &NetPolicy,
+        ctx: &TrainingContext<'_>,
+    ) -> Self {
+        let act_dim = match &policy.head {
+            Head::Gaussian(g) => g.act_dim,
+            _ => 0,
         };
-        let mut obs_norm = if cfg.normalize_observations {
-            ObsNorm::for_head(&head, &layout)
-        } else {
-            None
-        };
-        // The normalised tensors (`[n, dim]` each), decoded and normalised once: minibatches
-        // read them from here, every other tensor from the store.
-        let mut normalised: Vec<(usize, Vec<f32>)> = Vec::new();
-        if let Some(norm) = &mut obs_norm {
-            for (&t, stats) in norm.tensors.iter().zip(norm.stats.iter_mut()) {
-                let d = layout.dim(t);
-                let mut all = vec![0.0f32; n * d];
-                for (slot, dst) in all.chunks_exact_mut(d.max(1)).enumerate() {
-                    store.read_tensor(slot, t, &mut row, 0);
-                    dst.copy_from_slice(row.tensor_row(t, 0));
-                }
-                stats.update(&all, n);
-                for r in all.chunks_exact_mut(d.max(1)) {
-                    stats.apply(r);
-                }
-                normalised.push((t, all));
+        Self {
+            n_actions: layout.num_actions.unwrap_or(0),
+            act_dim,
+            adam: Adam::new(policy.params.len()),
+            grads: vec![0.0; policy.params.len()],
+            rng: ctx.rng("bc/minibatch"),
+            mb: ObsBatch::new(&layout),
+            idx: Vec::new(),
+            x: Vec::new(),
+            ws: MlpWs::default(),
+            dl: Vec::new(),
+            lp: Vec::new(),
+            dlog_std: vec![0.0; act_dim],
+            total: ctx.settings().total_env_steps.max(1),
+            samples: 0,
+            cfg,
+            layout,
+            demos,
+            normalised,
+        }
+    }
+
+    /// Continues from a state written by [`save_state`](Self::save_state), on the same dataset.
+    fn restore(&mut self, bytes: &[u8], policy: &mut NetPolicy) -> Result<(), RunError> {
+        let mut r = StateReader::new(bytes, "bc", STATE_VERSION)?;
+        if r.u64()? != self.demos.fingerprint {
+            return Err(resume_err(
+                "the dataset differs from the one training started on",
+            ));
+        }
+        policy.load_training_state(&mut r)?;
+        self.adam.load("policy", &mut r)?;
+        self.rng = r.rng()?;
+        self.samples = r.u64()?;
+        r.finish()
+    }
+
+    /// The state [`restore`](Self::restore) continues from.
+    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+        let mut w = StateWriter::new("bc", STATE_VERSION);
+        w.u64(self.demos.fingerprint);
+        policy.save_training_state(&mut w);
+        self.adam.save(&mut w);
+        w.rng(&self.rng);
+        w.u64(self.samples);
+        w.finish()
+    }
+
+    /// One gradient step on `batch_size` samples drawn with replacement.
+    fn step(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+        let b = self.cfg.batch_size;
+        self.draw_minibatch(b);
+        let inv = 1.0 / b as f32;
+        self.grads.fill(0.0);
+        match &mut policy.head {
+            Head::Discrete(net) => self.discrete_gradient(net, &policy.params, inv),
+            Head::Gaussian(g) => self.gaussian_gradient(g, &policy.params, inv),
+            Head::Squashed(_) => {}
+        }
+        clip_grad_norm(&mut self.grads, self.cfg.max_grad_norm);
+        self.adam.step(
+            &mut policy.params,
+            &self.grads,
+            self.cfg.lr.at(self.samples as f64 / self.total as f64),
+        );
+        self.samples += b as u64;
+        if self.adam.steps().is_multiple_of(100) {
+            check_finite("BC parameters", &policy.params)?;
+        }
+        Ok(())
+    }
+
+    /// `b` samples into `mb` (their indices in `idx`), normalised tensors from `normalised`.
+    fn draw_minibatch(&mut self, b: usize) {
+        let n = self.demos.n;
+        self.idx.clear();
+        self.idx.extend((0..b).map(|_| self.rng.index(n)));
+        self.mb.resize(b);
+        for (k, &r) in self.idx.iter().enumerate() {
+            self.demos.store.read(r, &mut self.mb, k);
+            for (t, all) in &self.normalised {
+                let d = self.layout.dim(*t);
+                self.mb
+                    .row_mut(*t, k)
+                    .copy_from_slice(&all[r * d..(r + 1) * d]);
             }
         }
-        let mut policy = NetPolicy::new("bc", &spec, head, params, obs_norm, ctx.seed())?;
-        let mut adam = Adam::new(policy.params.len());
-        let mut grads = vec![0.0f32; policy.params.len()];
-        let mut rng = ctx.rng("bc/minibatch");
-        let mut mb = ObsBatch::new(&layout);
-        let mut idx: Vec<usize> = Vec::new();
-        let (mut x, mut ws, mut dl, mut lp) =
-            (Vec::new(), MlpWs::default(), Vec::new(), Vec::new());
-        let mut dlog_std = vec![0.0f32; act_dim];
-        let total = ctx.settings().total_env_steps.max(1);
-        let mut samples = 0u64;
-        if let Some(bytes) = &resume {
-            let mut r = StateReader::new(bytes, "bc", STATE_VERSION)?;
-            if r.u64()? != data_fingerprint {
-                return Err(resume_err(
-                    "the dataset differs from the one training started on",
-                ));
-            }
-            policy.load_training_state(&mut r)?;
-            adam.load("policy", &mut r)?;
-            rng = r.rng()?;
-            samples = r.u64()?;
-            r.finish()?;
-        }
-        loop {
-            let b = cfg.batch_size;
-            idx.clear();
-            idx.extend((0..b).map(|_| rng.index(n)));
-            mb.resize(b);
-            for (k, &r) in idx.iter().enumerate() {
-                store.read(r, &mut mb, k);
-                for (t, all) in &normalised {
-                    let d = layout.dim(*t);
-                    mb.row_mut(*t, k).copy_from_slice(&all[r * d..(r + 1) * d]);
-                }
-            }
-            let inv = 1.0 / b as f32;
-            grads.fill(0.0);
-            match &mut policy.head {
-                Head::Discrete(net) => {
-                    net.forward(&policy.params, &mb);
-                    ensure(&mut dl, b * n_actions);
-                    dl[..b * n_actions].fill(0.0);
-                    ensure(&mut lp, n_actions);
-                    for (k, &r) in idx.iter().enumerate() {
-                        let l = &mut lp[..n_actions];
-                        masked::log_softmax(
-                            &net.logits()[k * n_actions..(k + 1) * n_actions],
-                            mb.mask(k),
-                            l,
-                        );
-                        // Cross-entropy: −log p(a).
-                        masked::grad_logp(
-                            l,
-                            act_d[r],
-                            -inv,
-                            &mut dl[k * n_actions..(k + 1) * n_actions],
-                        );
-                    }
-                    net.backward(&policy.params, &mut grads, &mb, &dl, None);
-                }
-                Head::Gaussian(g) => {
-                    mb.concat_into(&mut x);
-                    let mean = g.actor.forward(&policy.params, &x, b, &mut ws);
-                    let log_std = &policy.params[g.log_std..g.log_std + act_dim];
-                    ensure(&mut dl, b * act_dim);
-                    dl[..b * act_dim].fill(0.0);
-                    dlog_std.fill(0.0);
-                    for (k, &r) in idx.iter().enumerate() {
-                        let m = &mean[k * act_dim..(k + 1) * act_dim];
-                        let a = &act_c[r * act_dim..(r + 1) * act_dim];
-                        let d = &mut dl[k * act_dim..(k + 1) * act_dim];
-                        if cfg.nll {
-                            gaussian::grad_log_prob(m, log_std, a, -inv, d, &mut dlog_std);
-                        } else {
-                            for j in 0..act_dim {
-                                d[j] = 2.0 * (m[j] - a[j]) * inv / act_dim as f32;
-                            }
-                        }
-                    }
-                    g.actor
-                        .backward(&policy.params, &mut grads, &x, &dl, &mut ws, None);
-                    for (j, v) in dlog_std.iter().enumerate() {
-                        grads[g.log_std + j] += v;
-                    }
-                }
-                Head::Squashed(_) => {}
-            }
-            clip_grad_norm(&mut grads, cfg.max_grad_norm);
-            adam.step(
-                &mut policy.params,
-                &grads,
-                cfg.lr.at(samples as f64 / total as f64),
+    }
+
+    /// Cross-entropy −log p(a) of the demonstrated actions under the masked categorical.
+    fn discrete_gradient(&mut self, net: &mut DiscreteNet, params: &[f32], inv: f32) {
+        let (n_actions, b) = (self.n_actions, self.idx.len());
+        net.forward(params, &self.mb);
+        ensure(&mut self.dl, b * n_actions);
+        self.dl[..b * n_actions].fill(0.0);
+        ensure(&mut self.lp, n_actions);
+        for (k, &r) in self.idx.iter().enumerate() {
+            let l = &mut self.lp[..n_actions];
+            masked::log_softmax(
+                &net.logits()[k * n_actions..(k + 1) * n_actions],
+                self.mb.mask(k),
+                l,
             );
-            samples += b as u64;
-            if adam.steps().is_multiple_of(100) {
-                check_finite("BC parameters", &policy.params)?;
-            }
-            let save = |p: &NetPolicy| {
-                let mut w = StateWriter::new("bc", STATE_VERSION);
-                w.u64(data_fingerprint);
-                p.save_training_state(&mut w);
-                adam.save(&mut w);
-                w.rng(&rng);
-                w.u64(samples);
-                Ok(w.finish())
-            };
-            if ctx.progress_resumable(samples, &mut policy, save)? == Control::Stop {
-                break;
+            masked::grad_logp(
+                l,
+                self.demos.act_d[r],
+                -inv,
+                &mut self.dl[k * n_actions..(k + 1) * n_actions],
+            );
+        }
+        net.backward(params, &mut self.grads, &self.mb, &self.dl, None);
+    }
+
+    /// Gaussian negative log-likelihood of the demonstrated actions (mean network and
+    /// log-std), or the mean's squared error.
+    fn gaussian_gradient(&mut self, g: &GaussianArch, params: &[f32], inv: f32) {
+        let (act_dim, b) = (self.act_dim, self.idx.len());
+        self.mb.concat_into(&mut self.x);
+        let mean = g.actor.forward(params, &self.x, b, &mut self.ws);
+        let log_std = &params[g.log_std..g.log_std + act_dim];
+        ensure(&mut self.dl, b * act_dim);
+        self.dl[..b * act_dim].fill(0.0);
+        self.dlog_std.fill(0.0);
+        for (k, &r) in self.idx.iter().enumerate() {
+            let m = &mean[k * act_dim..(k + 1) * act_dim];
+            let a = &self.demos.act_c[r * act_dim..(r + 1) * act_dim];
+            let d = &mut self.dl[k * act_dim..(k + 1) * act_dim];
+            if self.cfg.nll {
+                gaussian::grad_log_prob(m, log_std, a, -inv, d, &mut self.dlog_std);
+            } else {
+                for j in 0..act_dim {
+                    d[j] = 2.0 * (m[j] - a[j]) * inv / act_dim as f32;
+                }
             }
         }
-        check_finite("BC parameters", &policy.params)?;
-        ctx.finish(samples, &mut policy)?;
-        Ok(Box::new(policy))
+        g.actor.backward(
+            params,
+            &mut self.grads,
+            &self.x,
+            &self.dl,
+            &mut self.ws,
+            None,
+        );
+        for (j, v) in self.dlog_std.iter().enumerate() {
+            self.grads[g.log_std + j] += v;
+        }
     }
 }

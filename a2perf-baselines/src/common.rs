@@ -1,13 +1,15 @@
 //! Pieces shared by the algorithms: hyperparameter reading, environment setup, network choice.
 
 use a2perf_core::{
-    EnvSpec, ParamKind, ParamSpec, Params, RunError, Space, TrainingContext, Value, VecEnv,
+    EnvSpec, ParamKind, ParamSpec, Params, RngStream, RunError, Space, TrainingContext, Value,
+    VecEnv, VecStep,
 };
 
-use crate::batch::ObsLayout;
+use crate::batch::{ObsBatch, ObsLayout};
 use crate::model::{DiscreteNet, GaussianArch, NetOptions};
 use crate::nn::optim::LrSchedule;
 use crate::policy::Head;
+use crate::replay::ReplayBuffer;
 
 pub(crate) fn hp(e: a2perf_core::ParamError) -> RunError {
     RunError::InvalidHyperparameter {
@@ -187,4 +189,59 @@ pub(crate) fn check_finite(what: &str, v: &[f32]) -> Result<(), RunError> {
     } else {
         Err(RunError::Diverged(format!("{what} became non-finite")))
     }
+}
+
+/// Fresh parameters for `head` (a masked categorical or a Gaussian with log-std
+/// `init_log_std`; a squashed head is SAC's, which initialises its own).
+pub(crate) fn initial_params(
+    head: &Head,
+    rng: &mut RngStream,
+    init_log_std: f32,
+) -> Result<Vec<f32>, RunError> {
+    match head {
+        Head::Discrete(net) => Ok(net.init_params(rng)),
+        Head::Gaussian(g) => Ok(g.init_params(rng, init_log_std)),
+        Head::Squashed(_) => Err(RunError::Unsupported("squashed head".into())),
+    }
+}
+
+/// Row `i` of `batch` becomes environment `i`'s current observation (after a reset, a resume
+/// or a step).
+pub(crate) fn write_observations(batch: &mut ObsBatch, outs: &[VecStep]) -> Result<(), RunError> {
+    for (i, out) in outs.iter().enumerate() {
+        batch.write_row(i, &out.step.observation)?;
+    }
+    Ok(())
+}
+
+/// Stores one step of every environment in `replay`, from its row of `cur` (the observation
+/// the action was chosen on) to its next observation (an ended episode's final one), with
+/// discrete action `act_d(i)` or the `d` continuous values of row `i` of `act_c`; then the new
+/// observations become `cur`.
+pub(crate) fn push_transitions(
+    replay: &mut ReplayBuffer,
+    cur: &mut ObsBatch,
+    outs: &[VecStep],
+    act_d: impl Fn(usize) -> usize,
+    act_c: &[f32],
+    d: usize,
+) -> Result<(), RunError> {
+    for (i, out) in outs.iter().enumerate() {
+        let next = if out.step.done() {
+            &out.final_observation
+        } else {
+            &out.step.observation
+        };
+        replay.push(
+            i,
+            cur,
+            i,
+            next,
+            act_d(i),
+            &act_c[i * d..(i + 1) * d],
+            out.step.reward as f32,
+            out.step.terminated,
+        )?;
+    }
+    write_observations(cur, outs)
 }

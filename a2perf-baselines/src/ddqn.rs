@@ -3,8 +3,8 @@
 //! exploration over legal actions; uniform replay of configurable capacity.
 
 use a2perf_core::{
-    Action, Algorithm, Control, ParamKind, ParamSpec, Params, Policy, PolicyError, RunError, Space,
-    TrainingContext, Value,
+    Action, Algorithm, Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, PolicyError,
+    RngStream, RunError, Space, TrainingContext, Value, VecEnv,
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
@@ -178,186 +178,254 @@ impl Algorithm for Ddqn {
     /// parameters, Adam, both random streams, the update counters, the whole replay buffer and
     /// every environment's current episode.
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
-        let cfg = self.config.clone();
         let resume = ctx.take_resume_state();
-        let (mut venv, spec) = make_vec_env(ctx)?;
+        let (venv, spec) = make_vec_env(ctx)?;
+        let (mut policy, mut run) = DdqnRun::new(self.config.clone(), venv, &spec, ctx)?;
+        match &resume {
+            Some(bytes) => run.restore(bytes, &mut policy, ctx)?,
+            None => write_observations(&mut run.cur, run.venv.reset_all()?)?,
+        }
+        loop {
+            run.choose_actions(&mut policy)?;
+            run.step_envs()?;
+            run.learn(&mut policy)?;
+            let save = |p: &NetPolicy| Ok(run.save_state(p));
+            if ctx.progress_resumable(run.env_steps, &mut policy, save)? == Control::Stop {
+                break;
+            }
+        }
+        ctx.finish(run.env_steps, &mut policy)?;
+        run.venv.close()?;
+        Ok(Box::new(policy))
+    }
+}
+
+/// Everything a DDQN run updates besides the online network (the policy): the environments,
+/// the target network, the optimiser, the replay, the random streams, the counters and the
+/// workspaces of the steps below.
+struct DdqnRun {
+    cfg: DdqnConfig,
+    venv: VecEnv,
+    n_env: usize,
+    action_space: Space,
+    /// Number of actions.
+    n: usize,
+    target_net: DiscreteNet,
+    target_params: Vec<f32>,
+    adam: Adam,
+    grads: Vec<f32>,
+    replay: ReplayBuffer,
+    sample: ReplaySample,
+    idx: Vec<usize>,
+    rng: RngStream,
+    sample_rng: RngStream,
+    /// Every environment's current observation.
+    cur: ObsBatch,
+    actions: Vec<Action>,
+    next_best: Vec<usize>,
+    targets: Vec<f32>,
+    dq: Vec<f32>,
+    total: u64,
+    env_steps: u64,
+    /// Gradient updates earned and not yet made (`updates_per_step` per environment step).
+    update_credit: f32,
+    updates: usize,
+}
+
+impl DdqnRun {
+    /// The untrained online network (as the policy), its target copy and the rest of the run.
+    fn new(
+        cfg: DdqnConfig,
+        venv: VecEnv,
+        spec: &EnvSpec,
+        ctx: &TrainingContext<'_>,
+    ) -> Result<(NetPolicy, Self), RunError> {
         let n_env = venv.len();
         if !matches!(spec.action_space, Space::Discrete { .. }) {
             return Err(RunError::Unsupported(
                 "DDQN needs a discrete action space".into(),
             ));
         }
-        let layout = ObsLayout::from_spec(&spec)?;
-        let net = DiscreteNet::for_spec(&spec, &layout, &cfg.net, false)?;
+        let layout = ObsLayout::from_spec(spec)?;
+        let net = DiscreteNet::for_spec(spec, &layout, &cfg.net, false)?;
         let params = net.init_params(&mut ctx.rng("ddqn/init"));
-        let mut target_params = params.clone();
-        let mut target_net = net.clone();
+        let target_params = params.clone();
+        let target_net = net.clone();
         let mut policy =
-            NetPolicy::new("ddqn", &spec, Head::Discrete(net), params, None, ctx.seed())?;
+            NetPolicy::new("ddqn", spec, Head::Discrete(net), params, None, ctx.seed())?;
         policy.explore_epsilon = cfg.epsilon_greedy;
-        let n = layout.num_actions.unwrap_or(0);
-        let mut replay = ReplayBuffer::new(&layout, cfg.replay_capacity, 0);
-        let mut sample = ReplaySample::new(&layout);
-        let mut idx = Vec::new();
-        let mut rng = ctx.rng("ddqn/explore");
-        let mut sample_rng = ctx.rng("ddqn/replay");
-        let mut adam = Adam::new(policy.params.len());
-        let mut grads = vec![0.0f32; policy.params.len()];
         let mut cur = ObsBatch::new(&layout);
-        let mut actions = vec![Action::Discrete(0); n_env];
-        let mut next_best: Vec<usize> = Vec::new();
-        let mut targets: Vec<f32> = Vec::new();
-        let mut dq: Vec<f32> = Vec::new();
-        let total = ctx.settings().total_env_steps.max(1);
-        let mut env_steps = 0u64;
-        let mut update_credit = 0.0f32;
-        let mut updates = 0usize;
-
         cur.resize(n_env);
-        match &resume {
-            Some(bytes) => {
-                let mut r = StateReader::new(bytes, "ddqn", STATE_VERSION)?;
-                policy.load_training_state(&mut r)?;
-                r.f32s_into("target parameters", &mut target_params)?;
-                adam.load("policy", &mut r)?;
-                rng = r.rng()?;
-                sample_rng = r.rng()?;
-                update_credit = r.f32()?;
-                updates = r.usize()?;
-                env_steps = r.u64()?;
-                replay.load(&mut r)?;
-                for (i, out) in r.envs(&mut venv, &mut |m| ctx.warn(m))?.iter().enumerate() {
-                    cur.write_row(i, &out.step.observation)?;
-                }
-                r.finish()?;
-            }
-            None => {
-                for (i, out) in venv.reset_all()?.iter().enumerate() {
-                    cur.write_row(i, &out.step.observation)?;
-                }
-            }
-        }
-        loop {
-            let progress = env_steps as f64 / total as f64;
-            let eps = if cfg.epsilon_decay_fraction > 0.0 {
-                let f = (progress / f64::from(cfg.epsilon_decay_fraction)).min(1.0) as f32;
-                cfg.epsilon_start + f * (cfg.epsilon_greedy - cfg.epsilon_start)
-            } else {
-                cfg.epsilon_greedy
-            };
-            if let Head::Discrete(net) = &mut policy.head {
-                net.forward(&policy.params, &cur);
-                for (i, slot) in actions.iter_mut().enumerate() {
-                    let mask = cur.mask(i);
-                    let a = if rng.uniform() < f64::from(eps) {
-                        spec.action_space.sample(&mut rng, mask)
-                    } else {
-                        masked::argmax(&net.logits()[i * n..(i + 1) * n], mask)
-                            .map(Action::Discrete)
-                    };
-                    *slot = a.ok_or(RunError::Policy(PolicyError::NoLegalAction))?;
-                }
-            }
-            let outs = venv.step_all(&actions)?;
-            for (i, out) in outs.iter().enumerate() {
-                let next = if out.step.done() {
-                    &out.final_observation
-                } else {
-                    &out.step.observation
-                };
-                let a = match actions[i] {
-                    Action::Discrete(a) => a,
-                    Action::Continuous(_) => 0,
-                };
-                replay.push(
-                    i,
-                    &cur,
-                    i,
-                    next,
-                    a,
-                    &[],
-                    out.step.reward as f32,
-                    out.step.terminated,
-                )?;
-            }
-            for (i, out) in outs.iter().enumerate() {
-                cur.write_row(i, &out.step.observation)?;
-            }
-            env_steps += n_env as u64;
+        let run = Self {
+            n_env,
+            action_space: spec.action_space.clone(),
+            n: layout.num_actions.unwrap_or(0),
+            target_net,
+            target_params,
+            adam: Adam::new(policy.params.len()),
+            grads: vec![0.0; policy.params.len()],
+            replay: ReplayBuffer::new(&layout, cfg.replay_capacity, 0),
+            sample: ReplaySample::new(&layout),
+            idx: Vec::new(),
+            rng: ctx.rng("ddqn/explore"),
+            sample_rng: ctx.rng("ddqn/replay"),
+            cur,
+            actions: vec![Action::Discrete(0); n_env],
+            next_best: Vec::new(),
+            targets: Vec::new(),
+            dq: Vec::new(),
+            total: ctx.settings().total_env_steps.max(1),
+            env_steps: 0,
+            update_credit: 0.0,
+            updates: 0,
+            venv,
+            cfg,
+        };
+        Ok((policy, run))
+    }
 
-            if replay.len() >= cfg.learning_starts.max(1) {
-                update_credit += cfg.updates_per_step * n_env as f32;
-                let lr = cfg.lr.at(env_steps as f64 / total as f64);
-                while update_credit >= 1.0 {
-                    update_credit -= 1.0;
-                    let Head::Discrete(net) = &mut policy.head else {
-                        break;
-                    };
-                    replay.sample(cfg.batch_size, &mut sample_rng, &mut idx, &mut sample);
-                    let b = sample.obs.len();
-                    // Double-Q target: online argmax, target evaluation.
-                    net.forward(&policy.params, &sample.next);
-                    next_best.clear();
-                    for k in 0..b {
-                        next_best.push(
-                            masked::argmax(&net.logits()[k * n..(k + 1) * n], sample.next.mask(k))
-                                .unwrap_or(usize::MAX),
-                        );
-                    }
-                    target_net.forward(&target_params, &sample.next);
-                    targets.clear();
-                    for (k, &best) in next_best.iter().enumerate() {
-                        let boot = if sample.terminated[k] || best == usize::MAX {
-                            0.0
-                        } else {
-                            target_net.logits()[k * n + best]
-                        };
-                        targets.push(sample.rewards[k] + cfg.gamma * boot);
-                    }
-                    net.forward(&policy.params, &sample.obs);
-                    ensure(&mut dq, b * n);
-                    dq[..b * n].fill(0.0);
-                    for k in 0..b {
-                        let a = sample.act_d[k];
-                        let err = net.logits()[k * n + a] - targets[k];
-                        let g = if cfg.huber {
-                            err.clamp(-1.0, 1.0)
-                        } else {
-                            2.0 * err
-                        };
-                        dq[k * n + a] = g / b as f32;
-                    }
-                    grads.fill(0.0);
-                    net.backward(&policy.params, &mut grads, &sample.obs, &dq, None);
-                    clip_grad_norm(&mut grads, cfg.max_grad_norm);
-                    adam.step(&mut policy.params, &grads, lr);
-                    updates += 1;
-                    if updates.is_multiple_of(cfg.target_update_period) {
-                        polyak(&mut target_params, &policy.params, cfg.target_tau);
-                    }
-                }
-                check_finite("DDQN parameters", &policy.params)?;
-            }
-            let save = |p: &NetPolicy| {
-                let mut w = StateWriter::new("ddqn", STATE_VERSION);
-                p.save_training_state(&mut w);
-                w.f32s(&target_params);
-                adam.save(&mut w);
-                w.rng(&rng);
-                w.rng(&sample_rng);
-                w.f32(update_credit);
-                w.usize(updates);
-                w.u64(env_steps);
-                replay.save(&mut w);
-                w.envs(&venv);
-                Ok(w.finish())
-            };
-            if ctx.progress_resumable(env_steps, &mut policy, save)? == Control::Stop {
-                break;
+    /// Continues from a state written by [`save_state`](Self::save_state).
+    fn restore(
+        &mut self,
+        bytes: &[u8],
+        policy: &mut NetPolicy,
+        ctx: &mut TrainingContext<'_>,
+    ) -> Result<(), RunError> {
+        let mut r = StateReader::new(bytes, "ddqn", STATE_VERSION)?;
+        policy.load_training_state(&mut r)?;
+        r.f32s_into("target parameters", &mut self.target_params)?;
+        self.adam.load("policy", &mut r)?;
+        self.rng = r.rng()?;
+        self.sample_rng = r.rng()?;
+        self.update_credit = r.f32()?;
+        self.updates = r.usize()?;
+        self.env_steps = r.u64()?;
+        self.replay.load(&mut r)?;
+        write_observations(&mut self.cur, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
+        r.finish()
+    }
+
+    /// The state [`restore`](Self::restore) continues from.
+    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+        let mut w = StateWriter::new("ddqn", STATE_VERSION);
+        policy.save_training_state(&mut w);
+        w.f32s(&self.target_params);
+        self.adam.save(&mut w);
+        w.rng(&self.rng);
+        w.rng(&self.sample_rng);
+        w.f32(self.update_credit);
+        w.usize(self.updates);
+        w.u64(self.env_steps);
+        self.replay.save(&mut w);
+        w.envs(&self.venv);
+        w.finish()
+    }
+
+    /// ε-greedy actions over the legal ones, ε decaying linearly from `epsilon_start` to
+    /// `epsilon_greedy` over the first `epsilon_decay_fraction` of the budget.
+    fn choose_actions(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+        let cfg = &self.cfg;
+        let progress = self.env_steps as f64 / self.total as f64;
+        let eps = if cfg.epsilon_decay_fraction > 0.0 {
+            let f = (progress / f64::from(cfg.epsilon_decay_fraction)).min(1.0) as f32;
+            cfg.epsilon_start + f * (cfg.epsilon_greedy - cfg.epsilon_start)
+        } else {
+            cfg.epsilon_greedy
+        };
+        let n = self.n;
+        if let Head::Discrete(net) = &mut policy.head {
+            net.forward(&policy.params, &self.cur);
+            for (i, slot) in self.actions.iter_mut().enumerate() {
+                let mask = self.cur.mask(i);
+                let a = if self.rng.uniform() < f64::from(eps) {
+                    self.action_space.sample(&mut self.rng, mask)
+                } else {
+                    masked::argmax(&net.logits()[i * n..(i + 1) * n], mask).map(Action::Discrete)
+                };
+                *slot = a.ok_or(RunError::Policy(PolicyError::NoLegalAction))?;
             }
         }
-        ctx.finish(env_steps, &mut policy)?;
-        venv.close()?;
-        Ok(Box::new(policy))
+        Ok(())
+    }
+
+    /// Steps every environment with the chosen actions, storing the transitions.
+    fn step_envs(&mut self) -> Result<(), RunError> {
+        let outs = self.venv.step_all(&self.actions)?;
+        let actions = &self.actions;
+        let act_d = |i: usize| match actions[i] {
+            Action::Discrete(a) => a,
+            Action::Continuous(_) => 0,
+        };
+        push_transitions(&mut self.replay, &mut self.cur, outs, act_d, &[], 0)?;
+        self.env_steps += self.n_env as u64;
+        Ok(())
+    }
+
+    /// The gradient updates earned by the last step, once the replay holds `learning_starts`
+    /// transitions.
+    fn learn(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+        if self.replay.len() < self.cfg.learning_starts.max(1) {
+            return Ok(());
+        }
+        self.update_credit += self.cfg.updates_per_step * self.n_env as f32;
+        let lr = self.cfg.lr.at(self.env_steps as f64 / self.total as f64);
+        while self.update_credit >= 1.0 {
+            self.update_credit -= 1.0;
+            let Head::Discrete(net) = &mut policy.head else {
+                break;
+            };
+            self.update(net, &mut policy.params, lr);
+        }
+        check_finite("DDQN parameters", &policy.params)
+    }
+
+    /// One update on a replay minibatch: the double-Q targets (online argmax, target
+    /// evaluation), the TD loss's gradient step and, every `target_update_period` updates,
+    /// the target network's.
+    fn update(&mut self, net: &mut DiscreteNet, params: &mut [f32], lr: f32) {
+        let (n, cfg) = (self.n, &self.cfg);
+        let sample = &mut self.sample;
+        self.replay
+            .sample(cfg.batch_size, &mut self.sample_rng, &mut self.idx, sample);
+        let b = sample.obs.len();
+        net.forward(params, &sample.next);
+        self.next_best.clear();
+        for k in 0..b {
+            self.next_best.push(
+                masked::argmax(&net.logits()[k * n..(k + 1) * n], sample.next.mask(k))
+                    .unwrap_or(usize::MAX),
+            );
+        }
+        self.target_net.forward(&self.target_params, &sample.next);
+        self.targets.clear();
+        for (k, &best) in self.next_best.iter().enumerate() {
+            let boot = if sample.terminated[k] || best == usize::MAX {
+                0.0
+            } else {
+                self.target_net.logits()[k * n + best]
+            };
+            self.targets.push(sample.rewards[k] + cfg.gamma * boot);
+        }
+        net.forward(params, &sample.obs);
+        ensure(&mut self.dq, b * n);
+        self.dq[..b * n].fill(0.0);
+        for k in 0..b {
+            let a = sample.act_d[k];
+            let err = net.logits()[k * n + a] - self.targets[k];
+            let g = if cfg.huber {
+                err.clamp(-1.0, 1.0)
+            } else {
+                2.0 * err
+            };
+            self.dq[k * n + a] = g / b as f32;
+        }
+        self.grads.fill(0.0);
+        net.backward(params, &mut self.grads, &sample.obs, &self.dq, None);
+        clip_grad_norm(&mut self.grads, cfg.max_grad_norm);
+        self.adam.step(params, &self.grads, lr);
+        self.updates += 1;
+        if self.updates.is_multiple_of(cfg.target_update_period) {
+            polyak(&mut self.target_params, params, cfg.target_tau);
+        }
     }
 }

@@ -19,6 +19,7 @@
 //! magic, both versions, the algorithm name, the observation layout against the environment's
 //! spec, every length, and rejects trailing bytes.
 
+use a2perf_core::bytes::ByteReader;
 use a2perf_core::{
     ActMode, Action, Checkpoint, EnvSpec, Observation, Policy, PolicyError, RngStream, Space,
 };
@@ -46,7 +47,7 @@ pub enum Head {
     Squashed(SquashedArch),
 }
 
-#[derive(Serialize, Deserialize)]
+#[derive(Clone, Serialize, Deserialize)]
 enum HeadSpec {
     Discrete {
         arch: DiscreteArch,
@@ -145,6 +146,161 @@ struct Header {
     norm_clip: f32,
     #[serde(default)]
     action_limit: f32,
+}
+
+fn bad(m: String) -> PolicyError {
+    PolicyError::BadCheckpoint(m)
+}
+
+/// Checks a checkpoint's container and payload header against `algorithm`; returns the
+/// header and the reader at the parameters.
+fn read_header<'a>(
+    ckpt: &'a Checkpoint,
+    algorithm: &str,
+) -> Result<(ByteReader<'a>, Header), PolicyError> {
+    if ckpt.algorithm != algorithm {
+        return Err(bad(format!(
+            "checkpoint was written by `{}`, not `{algorithm}`",
+            ckpt.algorithm
+        )));
+    }
+    if ckpt.format_version != PAYLOAD_VERSION {
+        return Err(bad(format!(
+            "payload format version {} is not supported (this build reads {PAYLOAD_VERSION})",
+            ckpt.format_version
+        )));
+    }
+    let mut r = ByteReader::new(&ckpt.payload);
+    if r.take(4)? != MAGIC {
+        return Err(bad(
+            "payload is not an a2perf-baselines network (bad magic)".into(),
+        ));
+    }
+    let version = r.u32()?;
+    if version != PAYLOAD_VERSION {
+        return Err(bad(format!("payload version {version} is not supported")));
+    }
+    let hlen = r.u32()? as usize;
+    let header: Header =
+        serde_json::from_slice(r.take(hlen)?).map_err(|e| bad(format!("malformed header: {e}")))?;
+    if header.algorithm != algorithm {
+        return Err(bad(format!(
+            "payload header names algorithm `{}`, expected `{algorithm}`",
+            header.algorithm
+        )));
+    }
+    Ok((r, header))
+}
+
+/// The network of `header` for environment `spec` and its number of parameters. A circuit
+/// placement network does not depend on the netlist's size, so it may run on other circuits;
+/// every other network needs exactly the observations and actions it was trained on.
+fn head_for_env(
+    header: &Header,
+    spec: &EnvSpec,
+    layout: &ObsLayout,
+) -> Result<(Head, usize), PolicyError> {
+    let mut head_spec = header.head.clone();
+    if !layout.same_shapes(&header.layout)
+        || !same_action_space(&header.action_space, &spec.action_space)
+    {
+        match &mut head_spec {
+            HeadSpec::Discrete {
+                arch: DiscreteArch::Circuit(c),
+                n,
+                ..
+            } => {
+                c.retarget(spec, layout).map_err(|why| {
+                    bad(format!(
+                        "checkpoint's circuit network cannot run on environment `{}`: {why}",
+                        spec.id
+                    ))
+                })?;
+                *n = layout.num_actions.unwrap_or(0);
+            }
+            _ if !layout.same_shapes(&header.layout) => {
+                return Err(bad(format!(
+                    "checkpoint was trained on observations {:?} but environment `{}` produces {:?}",
+                    header.layout.tensors, spec.id, layout.tensors
+                )));
+            }
+            _ => {
+                return Err(bad(format!(
+                    "checkpoint's action space differs from environment `{}`'s",
+                    spec.id
+                )));
+            }
+        }
+    }
+    if let HeadSpec::Discrete { arch, .. } = &head_spec {
+        arch.check_dtypes(layout).map_err(|why| {
+            bad(format!(
+                "checkpoint's network cannot run on environment `{}`: {why}",
+                spec.id
+            ))
+        })?;
+    }
+    Ok(match head_spec {
+        HeadSpec::Discrete {
+            arch,
+            n,
+            num_params,
+        } => (
+            Head::Discrete(DiscreteNet::from_arch(arch, n, num_params)),
+            num_params,
+        ),
+        HeadSpec::Gaussian(g) => {
+            let n = g.num_params;
+            (Head::Gaussian(g), n)
+        }
+        HeadSpec::Squashed(s) => {
+            let n = s.num_params;
+            (Head::Squashed(s), n)
+        }
+    })
+}
+
+/// The observation statistics stored after the parameters, if the header names any.
+fn read_obs_norm(
+    header: &Header,
+    spec: &EnvSpec,
+    layout: &ObsLayout,
+    r: &mut ByteReader<'_>,
+) -> Result<Option<ObsNorm>, PolicyError> {
+    if header.norm_tensors.is_empty() {
+        return Ok(None);
+    }
+    if header.norm_tensors.len() != header.norm_dims.len() {
+        return Err(bad("normalisation tensors and dims disagree".into()));
+    }
+    let mut stats = Vec::new();
+    for (&t, &d) in header.norm_tensors.iter().zip(&header.norm_dims) {
+        if t >= layout.tensors.len() || layout.dim(t) != d {
+            return Err(bad(format!(
+                "normalisation of tensor {t} has the wrong size"
+            )));
+        }
+        if layout.is_integer(t) {
+            return Err(bad(format!(
+                "the checkpoint normalises tensor `{}`, which environment `{}` gives as \
+                 {} (integers are never normalised); retrain the policy",
+                layout.tensors[t].0,
+                spec.id,
+                layout.dtype(t)
+            )));
+        }
+        let mut s = RunningNorm::new(d);
+        s.clip = header.norm_clip;
+        for v in s.mean.iter_mut().chain(s.var.iter_mut()) {
+            *v = r.f64()?;
+        }
+        s.count = r.f64()?;
+        stats.push(s);
+    }
+    Ok(Some(ObsNorm {
+        tensors: header.norm_tensors.clone(),
+        stats,
+    }))
 }
 
 /// A neural-network policy (any of the baselines). Greedy actions are deterministic; exploring
@@ -337,99 +493,9 @@ impl NetPolicy {
         spec: &EnvSpec,
         algorithm: &str,
     ) -> Result<Self, PolicyError> {
-        let bad = |m: String| PolicyError::BadCheckpoint(m);
-        if ckpt.algorithm != algorithm {
-            return Err(bad(format!(
-                "checkpoint was written by `{}`, not `{algorithm}`",
-                ckpt.algorithm
-            )));
-        }
-        if ckpt.format_version != PAYLOAD_VERSION {
-            return Err(bad(format!(
-                "payload format version {} is not supported (this build reads {PAYLOAD_VERSION})",
-                ckpt.format_version
-            )));
-        }
-        let mut r = a2perf_core::bytes::ByteReader::new(&ckpt.payload);
-        if r.take(4)? != MAGIC {
-            return Err(bad(
-                "payload is not an a2perf-baselines network (bad magic)".into(),
-            ));
-        }
-        let version = r.u32()?;
-        if version != PAYLOAD_VERSION {
-            return Err(bad(format!("payload version {version} is not supported")));
-        }
-        let hlen = r.u32()? as usize;
-        let header: Header = serde_json::from_slice(r.take(hlen)?)
-            .map_err(|e| bad(format!("malformed header: {e}")))?;
-        if header.algorithm != algorithm {
-            return Err(bad(format!(
-                "payload header names algorithm `{}`, expected `{algorithm}`",
-                header.algorithm
-            )));
-        }
+        let (mut r, header) = read_header(ckpt, algorithm)?;
         let layout = ObsLayout::from_spec(spec)?;
-        let mut head_spec = header.head;
-        if !layout.same_shapes(&header.layout)
-            || !same_action_space(&header.action_space, &spec.action_space)
-        {
-            // A circuit placement network does not depend on the netlist's size, so it may run on
-            // other circuits; every other network needs exactly the observations it was trained on.
-            match &mut head_spec {
-                HeadSpec::Discrete {
-                    arch: DiscreteArch::Circuit(c),
-                    n,
-                    ..
-                } => {
-                    c.retarget(spec, &layout).map_err(|why| {
-                        bad(format!(
-                            "checkpoint's circuit network cannot run on environment `{}`: {why}",
-                            spec.id
-                        ))
-                    })?;
-                    *n = layout.num_actions.unwrap_or(0);
-                }
-                _ if !layout.same_shapes(&header.layout) => {
-                    return Err(bad(format!(
-                        "checkpoint was trained on observations {:?} but environment `{}` produces {:?}",
-                        header.layout.tensors, spec.id, layout.tensors
-                    )));
-                }
-                _ => {
-                    return Err(bad(format!(
-                        "checkpoint's action space differs from environment `{}`'s",
-                        spec.id
-                    )));
-                }
-            }
-        }
-        if let HeadSpec::Discrete { arch, .. } = &head_spec {
-            arch.check_dtypes(&layout).map_err(|why| {
-                bad(format!(
-                    "checkpoint's network cannot run on environment `{}`: {why}",
-                    spec.id
-                ))
-            })?;
-        }
-        let (head, expected) = match head_spec {
-            HeadSpec::Discrete {
-                arch,
-                n,
-                num_params,
-            } => (
-                Head::Discrete(DiscreteNet::from_arch(arch, n, num_params)),
-                num_params,
-            ),
-            HeadSpec::Gaussian(g) => {
-                let n = g.num_params;
-                (Head::Gaussian(g), n)
-            }
-            HeadSpec::Squashed(s) => {
-                let n = s.num_params;
-                (Head::Squashed(s), n)
-            }
-        };
+        let (head, expected) = head_for_env(&header, spec, &layout)?;
         let count = r.u64()?;
         if count != expected as u64 {
             return Err(bad(format!(
@@ -445,41 +511,7 @@ impl NetPolicy {
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
             .collect();
-        let obs_norm = if header.norm_tensors.is_empty() {
-            None
-        } else {
-            if header.norm_tensors.len() != header.norm_dims.len() {
-                return Err(bad("normalisation tensors and dims disagree".into()));
-            }
-            let mut stats = Vec::new();
-            for (&t, &d) in header.norm_tensors.iter().zip(&header.norm_dims) {
-                if t >= layout.tensors.len() || layout.dim(t) != d {
-                    return Err(bad(format!(
-                        "normalisation of tensor {t} has the wrong size"
-                    )));
-                }
-                if layout.is_integer(t) {
-                    return Err(bad(format!(
-                        "the checkpoint normalises tensor `{}`, which environment `{}` gives as \
-                         {} (integers are never normalised); retrain the policy",
-                        layout.tensors[t].0,
-                        spec.id,
-                        layout.dtype(t)
-                    )));
-                }
-                let mut s = RunningNorm::new(d);
-                s.clip = header.norm_clip;
-                for v in s.mean.iter_mut().chain(s.var.iter_mut()) {
-                    *v = r.f64()?;
-                }
-                s.count = r.f64()?;
-                stats.push(s);
-            }
-            Some(ObsNorm {
-                tensors: header.norm_tensors,
-                stats,
-            })
-        };
+        let obs_norm = read_obs_norm(&header, spec, &layout, &mut r)?;
         if r.remaining() != 0 {
             return Err(bad(format!(
                 "{} trailing bytes after the payload",

@@ -8,13 +8,13 @@
 //! with a state-independent log-std (separate actor and value MLPs, as TF-Agents).
 
 use a2perf_core::{
-    Action, Algorithm, Control, ParamKind, ParamSpec, Params, Policy, RunError, TrainingContext,
-    Value,
+    Action, Algorithm, Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError,
+    TrainingContext, Value, VecEnv,
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
 use crate::common::*;
-use crate::model::NetOptions;
+use crate::model::{DiscreteNet, GaussianArch, NetOptions};
 use crate::nn::dist::{gaussian, masked};
 use crate::nn::norm::RewardScaler;
 use crate::nn::optim::{Adam, LrSchedule};
@@ -250,37 +250,114 @@ impl Algorithm for Ppo {
     /// order, the step count and every environment's current episode. A resume point is taken
     /// after an update, when the rollout buffer holds nothing that is still needed.
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
-        let cfg = self.config.clone();
         let resume = ctx.take_resume_state();
-        let (mut venv, spec) = make_vec_env(ctx)?;
-        let n_env = venv.len();
+        let (venv, spec) = make_vec_env(ctx)?;
         let layout = ObsLayout::from_spec(&spec)?;
-        let head = head_for(&spec, &layout, &cfg.net, true)?;
-        let mut init_rng = ctx.rng("ppo/init");
-        let params = match &head {
-            Head::Discrete(net) => net.init_params(&mut init_rng),
-            Head::Gaussian(g) => g.init_params(&mut init_rng, cfg.init_log_std),
-            Head::Squashed(_) => return Err(RunError::Unsupported("squashed head".into())),
-        };
+        let mut policy = self.initial_policy(ctx, &spec, &layout)?;
+        let mut run = PpoRun::new(self.config.clone(), venv, &layout, &policy, ctx);
+        match &resume {
+            Some(bytes) => run.restore(bytes, &mut policy, ctx)?,
+            None => write_observations(&mut run.raw, run.venv.reset_all()?)?,
+        }
+        loop {
+            run.collect_rollout(&mut policy)?;
+            run.compute_advantages(&mut policy);
+            run.optimise(&mut policy);
+            check_finite("PPO parameters", &policy.params)?;
+            let save = |p: &NetPolicy| Ok(run.save_state(p));
+            if ctx.progress_resumable(run.env_steps, &mut policy, save)? == Control::Stop {
+                break;
+            }
+        }
+        ctx.finish(run.env_steps, &mut policy)?;
+        run.venv.close()?;
+        Ok(Box::new(policy))
+    }
+}
+
+impl Ppo {
+    /// The untrained policy: its network for `spec`, fresh parameters and, when configured,
+    /// empty observation statistics.
+    fn initial_policy(
+        &self,
+        ctx: &TrainingContext<'_>,
+        spec: &EnvSpec,
+        layout: &ObsLayout,
+    ) -> Result<NetPolicy, RunError> {
+        let cfg = &self.config;
+        let head = head_for(spec, layout, &cfg.net, true)?;
+        let params = initial_params(&head, &mut ctx.rng("ppo/init"), cfg.init_log_std)?;
         let obs_norm = if cfg.normalize_observations {
-            ObsNorm::for_head(&head, &layout)
+            ObsNorm::for_head(&head, layout)
         } else {
             None
         };
-        let mut policy = NetPolicy::new("ppo", &spec, head, params, obs_norm, ctx.seed())?;
+        Ok(NetPolicy::new(
+            "ppo",
+            spec,
+            head,
+            params,
+            obs_norm,
+            ctx.seed(),
+        )?)
+    }
+}
+
+/// Everything a PPO run updates besides the policy: the environments, the optimiser, the
+/// reward scaler, the random streams, the rollout and the workspaces of the steps below.
+struct PpoRun {
+    cfg: PpoConfig,
+    venv: VecEnv,
+    n_env: usize,
+    /// Rows of a rollout: `num_steps × n_env`, step-major.
+    rows: usize,
+    act_dim: usize,
+    n_actions: usize,
+    rng: RngStream,
+    mb_rng: RngStream,
+    adam: Adam,
+    grads: Vec<f32>,
+    scaler: RewardScaler,
+    ro: Rollout,
+    /// Every environment's current observation, raw.
+    raw: ObsBatch,
+    /// `raw` normalised.
+    now: ObsBatch,
+    /// Final observations of the episodes truncated at this step, normalised, and their rows.
+    finals: ObsBatch,
+    final_rows: Vec<usize>,
+    mb: ObsBatch,
+    fw: Forward,
+    actions: Vec<Action>,
+    noise: Vec<f32>,
+    /// The rollout's rows in minibatch order (shuffled at every epoch).
+    order: Vec<usize>,
+    dlogits: Vec<f32>,
+    dvalues: Vec<f32>,
+    dmean: Vec<f32>,
+    dlog_std: Vec<f32>,
+    next_adv: Vec<f32>,
+    next_val: Vec<f32>,
+    total: u64,
+    env_steps: u64,
+}
+
+impl PpoRun {
+    fn new(
+        cfg: PpoConfig,
+        venv: VecEnv,
+        layout: &ObsLayout,
+        policy: &NetPolicy,
+        ctx: &TrainingContext<'_>,
+    ) -> Self {
+        let n_env = venv.len();
         let act_dim = match &policy.head {
             Head::Gaussian(g) => g.act_dim,
             _ => 0,
         };
-        let n_actions = layout.num_actions.unwrap_or(0);
-        let mut rng = ctx.rng("ppo/actions");
-        let mut mb_rng = ctx.rng("ppo/minibatch");
-        let mut adam = Adam::new(policy.params.len());
-        let mut grads = vec![0.0f32; policy.params.len()];
-        let mut scaler = RewardScaler::new(n_env, f64::from(cfg.gamma));
         let rows = cfg.num_steps * n_env;
         let mut ro = Rollout {
-            obs: ObsBatch::new(&layout),
+            obs: ObsBatch::new(layout),
             act_d: vec![0; rows],
             act_c: vec![0.0; rows * act_dim],
             logp: vec![0.0; rows],
@@ -291,287 +368,382 @@ impl Algorithm for Ppo {
             ret: vec![0.0; rows],
         };
         ro.obs.resize(rows);
-        let mut now = ObsBatch::new(&layout);
-        let mut raw = ObsBatch::new(&layout);
-        let mut finals = ObsBatch::new(&layout);
-        let mut final_rows: Vec<usize> = Vec::new();
-        let mut mb = ObsBatch::new(&layout);
-        let mut fw = Forward {
-            x: Vec::new(),
-            actor: MlpWs::default(),
-            critic: MlpWs::default(),
-            logp: Vec::new(),
-        };
-        let mut actions: Vec<Action> = vec![Action::Discrete(0); n_env];
-        let mut noise = vec![0.0f32; act_dim];
-        let mut order: Vec<usize> = (0..rows).collect();
-        let mut dlogits: Vec<f32> = Vec::new();
-        let mut dvalues: Vec<f32> = Vec::new();
-        let mut dmean: Vec<f32> = Vec::new();
-        let mut next_adv = vec![0.0f32; n_env];
-        let mut next_val = vec![0.0f32; n_env];
-        let mut dlog_std = vec![0.0f32; act_dim];
-        let total = ctx.settings().total_env_steps.max(1);
-        let mut env_steps: u64 = 0;
-
-        // Current observations (raw) of every environment.
+        let mut raw = ObsBatch::new(layout);
         raw.resize(n_env);
-        match &resume {
-            Some(bytes) => {
-                let mut r = StateReader::new(bytes, "ppo", STATE_VERSION)?;
-                policy.load_training_state(&mut r)?;
-                adam.load("policy", &mut r)?;
-                scaler.load(&mut r)?;
-                rng = r.rng()?;
-                mb_rng = r.rng()?;
-                let saved_order = r.usizes()?;
-                if saved_order.len() != rows {
-                    return Err(resume_err(format!(
-                        "rollout of {} rows saved, this configuration has {rows}",
-                        saved_order.len()
-                    )));
-                }
-                order = saved_order;
-                env_steps = r.u64()?;
-                for (i, out) in r.envs(&mut venv, &mut |m| ctx.warn(m))?.iter().enumerate() {
-                    raw.write_row(i, &out.step.observation)?;
-                }
-                r.finish()?;
-            }
-            None => {
-                for (i, out) in venv.reset_all()?.iter().enumerate() {
-                    raw.write_row(i, &out.step.observation)?;
-                }
-            }
+        Self {
+            venv,
+            n_env,
+            rows,
+            act_dim,
+            n_actions: layout.num_actions.unwrap_or(0),
+            rng: ctx.rng("ppo/actions"),
+            mb_rng: ctx.rng("ppo/minibatch"),
+            adam: Adam::new(policy.params.len()),
+            grads: vec![0.0; policy.params.len()],
+            scaler: RewardScaler::new(n_env, f64::from(cfg.gamma)),
+            ro,
+            raw,
+            now: ObsBatch::new(layout),
+            finals: ObsBatch::new(layout),
+            final_rows: Vec::new(),
+            mb: ObsBatch::new(layout),
+            fw: Forward {
+                x: Vec::new(),
+                actor: MlpWs::default(),
+                critic: MlpWs::default(),
+                logp: Vec::new(),
+            },
+            actions: vec![Action::Discrete(0); n_env],
+            noise: vec![0.0; act_dim],
+            order: (0..rows).collect(),
+            dlogits: Vec::new(),
+            dvalues: Vec::new(),
+            dmean: Vec::new(),
+            dlog_std: vec![0.0; act_dim],
+            next_adv: vec![0.0; n_env],
+            next_val: vec![0.0; n_env],
+            total: ctx.settings().total_env_steps.max(1),
+            env_steps: 0,
+            cfg,
         }
-        loop {
-            for t in 0..cfg.num_steps {
-                if let Some(n) = &mut policy.obs_norm {
-                    n.update(&raw, n_env);
-                }
-                now.resize(n_env);
-                for i in 0..n_env {
-                    now.copy_row(i, &raw, i);
-                    if let Some(n) = &policy.obs_norm {
-                        n.apply(&mut now, i);
-                    }
-                    ro.obs.copy_row(t * n_env + i, &now, i);
-                }
-                fw.run(&mut policy, &now);
-                #[allow(clippy::needless_range_loop)] // i indexes several parallel buffers
-                for i in 0..n_env {
-                    let row = t * n_env + i;
-                    ro.values[row] = fw.value(&policy, i);
-                    match &policy.head {
-                        Head::Discrete(net) => {
-                            let logits = &net.logits()[i * n_actions..(i + 1) * n_actions];
-                            ensure(&mut fw.logp, n_actions);
-                            let lp = &mut fw.logp[..n_actions];
-                            if !masked::log_softmax(logits, now.mask(i), lp) {
-                                return Err(RunError::Policy(
-                                    a2perf_core::PolicyError::NoLegalAction,
-                                ));
-                            }
-                            let a = masked::sample(lp, &mut rng)
-                                .ok_or(RunError::Policy(a2perf_core::PolicyError::NoLegalAction))?;
-                            ro.act_d[row] = a;
-                            ro.logp[row] = lp[a];
-                            actions[i] = Action::Discrete(a);
-                        }
-                        Head::Gaussian(g) => {
-                            let mean = &g.actor.output(&fw.actor)[i * act_dim..(i + 1) * act_dim];
-                            let log_std = &policy.params[g.log_std..g.log_std + act_dim];
-                            for (k, z) in noise.iter_mut().enumerate() {
-                                *z = mean[k] + log_std[k].exp() * rng.normal() as f32;
-                            }
-                            ro.act_c[row * act_dim..(row + 1) * act_dim].copy_from_slice(&noise);
-                            ro.logp[row] = gaussian::log_prob(mean, log_std, &noise);
-                            actions[i] = clip_action(&policy.action_space, &noise, &mut actions[i]);
-                        }
-                        Head::Squashed(_) => {}
-                    }
-                }
-                let outs = venv.step_all(&actions)?;
-                finals.clear();
-                final_rows.clear();
-                for (i, out) in outs.iter().enumerate() {
-                    let row = t * n_env + i;
-                    let done = out.step.done();
-                    let r = if cfg.normalize_rewards {
-                        scaler.scale(i, out.step.reward, done)
-                    } else {
-                        out.step.reward
-                    };
-                    ro.rewards[row] = r as f32;
-                    ro.ended[row] = done;
-                    if out.step.truncated && !out.step.terminated {
-                        let fr = finals.push(&out.final_observation)?;
-                        if let Some(n) = &policy.obs_norm {
-                            n.apply(&mut finals, fr);
-                        }
-                        final_rows.push(row);
-                    }
-                    raw.write_row(i, &out.step.observation)?;
-                }
-                if !finals.is_empty() {
-                    fw.run(&mut policy, &finals);
-                    for (k, &row) in final_rows.iter().enumerate() {
-                        ro.rewards[row] += cfg.gamma * fw.value(&policy, k);
-                    }
-                }
-                env_steps += n_env as u64;
-            }
-            // Bootstrap values of the current observations.
-            now.resize(n_env);
-            for i in 0..n_env {
-                now.copy_row(i, &raw, i);
-                if let Some(n) = &policy.obs_norm {
-                    n.apply(&mut now, i);
-                }
-            }
-            fw.run(&mut policy, &now);
-            next_adv.fill(0.0);
-            for (i, v) in next_val.iter_mut().enumerate() {
-                *v = fw.value(&policy, i);
-            }
-            for t in (0..cfg.num_steps).rev() {
-                for i in 0..n_env {
-                    let row = t * n_env + i;
-                    let nonterminal = if ro.ended[row] { 0.0 } else { 1.0 };
-                    let delta =
-                        ro.rewards[row] + cfg.gamma * next_val[i] * nonterminal - ro.values[row];
-                    let a = delta + cfg.gamma * cfg.gae_lambda * nonterminal * next_adv[i];
-                    ro.adv[row] = a;
-                    ro.ret[row] = a + ro.values[row];
-                    next_adv[i] = a;
-                    next_val[i] = ro.values[row];
-                }
-            }
-            // Optimisation.
-            let lr = cfg.lr.at(env_steps as f64 / total as f64);
-            let mbs = cfg.minibatch_size.min(rows);
-            for _ in 0..cfg.num_epochs {
-                mb_rng.shuffle(&mut order);
-                for chunk in order.chunks(mbs) {
-                    mb.gather(&ro.obs, chunk);
-                    fw.run(&mut policy, &mb);
-                    let bsz = chunk.len();
-                    let (mut amean, mut astd) = (0.0f64, 0.0f64);
-                    for &r in chunk {
-                        amean += f64::from(ro.adv[r]);
-                    }
-                    amean /= bsz as f64;
-                    for &r in chunk {
-                        astd += (f64::from(ro.adv[r]) - amean).powi(2);
-                    }
-                    astd = (astd / bsz as f64).sqrt();
-                    let inv_b = 1.0 / bsz as f32;
-                    grads.fill(0.0);
-                    ensure(&mut dvalues, bsz);
-                    for (k, &r) in chunk.iter().enumerate() {
-                        let v = fw.value(&policy, k);
-                        dvalues[k] = 2.0 * cfg.value_coef * (v - ro.ret[r]) * inv_b;
-                    }
-                    let adv_of = |r: usize| {
-                        if bsz > 1 {
-                            ((f64::from(ro.adv[r]) - amean) / (astd + 1e-8)) as f32
-                        } else {
-                            ro.adv[r]
-                        }
-                    };
-                    let clip = cfg.clip_ratio;
-                    // ∂L/∂logπ(a) of the clipped surrogate −min(ρA, clip(ρ)A).
-                    let surrogate = |logp_new: f32, logp_old: f32, a: f32| {
-                        let ratio = (logp_new - logp_old).exp();
-                        let active =
-                            (a > 0.0 && ratio < 1.0 + clip) || (a < 0.0 && ratio > 1.0 - clip);
-                        if active { -a * ratio } else { 0.0 }
-                    };
-                    match &mut policy.head {
-                        Head::Discrete(net) => {
-                            ensure(&mut dlogits, bsz * n_actions);
-                            dlogits[..bsz * n_actions].fill(0.0);
-                            ensure(&mut fw.logp, n_actions);
-                            for (k, &r) in chunk.iter().enumerate() {
-                                let logits = &net.logits()[k * n_actions..(k + 1) * n_actions];
-                                let lp = &mut fw.logp[..n_actions];
-                                masked::log_softmax(logits, mb.mask(k), lp);
-                                let a = ro.act_d[r];
-                                let g = surrogate(lp[a], ro.logp[r], adv_of(r));
-                                let dl = &mut dlogits[k * n_actions..(k + 1) * n_actions];
-                                masked::grad_logp(lp, a, g * inv_b, dl);
-                                masked::grad_entropy(lp, -cfg.entropy_coef * inv_b, dl);
-                            }
-                            net.backward(&policy.params, &mut grads, &mb, &dlogits, Some(&dvalues));
-                        }
-                        Head::Gaussian(g) => {
-                            ensure(&mut dmean, bsz * act_dim);
-                            let log_std = &policy.params[g.log_std..g.log_std + act_dim];
-                            let means = g.actor.output(&fw.actor);
-                            dlog_std.fill(0.0);
-                            for (k, &r) in chunk.iter().enumerate() {
-                                let mean = &means[k * act_dim..(k + 1) * act_dim];
-                                let a = &ro.act_c[r * act_dim..(r + 1) * act_dim];
-                                let lp = gaussian::log_prob(mean, log_std, a);
-                                let gcoef = surrogate(lp, ro.logp[r], adv_of(r)) * inv_b;
-                                let dm = &mut dmean[k * act_dim..(k + 1) * act_dim];
-                                dm.fill(0.0);
-                                gaussian::grad_log_prob(mean, log_std, a, gcoef, dm, &mut dlog_std);
-                            }
-                            for d in &mut dlog_std {
-                                *d -= cfg.entropy_coef;
-                            }
-                            g.actor.backward(
-                                &policy.params,
-                                &mut grads,
-                                &fw.x,
-                                &dmean,
-                                &mut fw.actor,
-                                None,
-                            );
-                            if let Some(c) = &g.critic {
-                                c.backward(
-                                    &policy.params,
-                                    &mut grads,
-                                    &fw.x,
-                                    &dvalues,
-                                    &mut fw.critic,
-                                    None,
-                                );
-                            }
-                            if cfg.learn_log_std {
-                                for (k, d) in dlog_std.iter().enumerate() {
-                                    grads[g.log_std + k] += d;
-                                }
-                            }
-                        }
-                        Head::Squashed(_) => {}
-                    }
-                    clip_grad_norm(&mut grads, cfg.max_grad_norm);
-                    adam.step(&mut policy.params, &grads, lr);
-                }
-            }
-            check_finite("PPO parameters", &policy.params)?;
-            let save = |p: &NetPolicy| {
-                let mut w = StateWriter::new("ppo", STATE_VERSION);
-                p.save_training_state(&mut w);
-                adam.save(&mut w);
-                scaler.save(&mut w);
-                w.rng(&rng);
-                w.rng(&mb_rng);
-                w.usizes(&order);
-                w.u64(env_steps);
-                w.envs(&venv);
-                Ok(w.finish())
-            };
-            if ctx.progress_resumable(env_steps, &mut policy, save)? == Control::Stop {
-                break;
-            }
-        }
-        ctx.finish(env_steps, &mut policy)?;
-        venv.close()?;
-        Ok(Box::new(policy))
     }
+
+    /// Continues from a state written by [`save_state`](Self::save_state).
+    fn restore(
+        &mut self,
+        bytes: &[u8],
+        policy: &mut NetPolicy,
+        ctx: &mut TrainingContext<'_>,
+    ) -> Result<(), RunError> {
+        let mut r = StateReader::new(bytes, "ppo", STATE_VERSION)?;
+        policy.load_training_state(&mut r)?;
+        self.adam.load("policy", &mut r)?;
+        self.scaler.load(&mut r)?;
+        self.rng = r.rng()?;
+        self.mb_rng = r.rng()?;
+        let saved_order = r.usizes()?;
+        if saved_order.len() != self.rows {
+            return Err(resume_err(format!(
+                "rollout of {} rows saved, this configuration has {}",
+                saved_order.len(),
+                self.rows
+            )));
+        }
+        self.order = saved_order;
+        self.env_steps = r.u64()?;
+        write_observations(&mut self.raw, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
+        r.finish()
+    }
+
+    /// The state [`restore`](Self::restore) continues from.
+    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+        let mut w = StateWriter::new("ppo", STATE_VERSION);
+        policy.save_training_state(&mut w);
+        self.adam.save(&mut w);
+        self.scaler.save(&mut w);
+        w.rng(&self.rng);
+        w.rng(&self.mb_rng);
+        w.usizes(&self.order);
+        w.u64(self.env_steps);
+        w.envs(&self.venv);
+        w.finish()
+    }
+
+    /// `num_steps` steps of every environment into the rollout. Rewards are scaled when
+    /// configured; a truncated (not terminated) episode's reward takes the discounted value of
+    /// its final observation.
+    fn collect_rollout(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+        let n_env = self.n_env;
+        for t in 0..self.cfg.num_steps {
+            self.choose_actions(policy, t)?;
+            let outs = self.venv.step_all(&self.actions)?;
+            self.finals.clear();
+            self.final_rows.clear();
+            for (i, out) in outs.iter().enumerate() {
+                let row = t * n_env + i;
+                let done = out.step.done();
+                let r = if self.cfg.normalize_rewards {
+                    self.scaler.scale(i, out.step.reward, done)
+                } else {
+                    out.step.reward
+                };
+                self.ro.rewards[row] = r as f32;
+                self.ro.ended[row] = done;
+                if out.step.truncated && !out.step.terminated {
+                    let fr = self.finals.push(&out.final_observation)?;
+                    if let Some(n) = &policy.obs_norm {
+                        n.apply(&mut self.finals, fr);
+                    }
+                    self.final_rows.push(row);
+                }
+                self.raw.write_row(i, &out.step.observation)?;
+            }
+            if !self.finals.is_empty() {
+                self.fw.run(policy, &self.finals);
+                for (k, &row) in self.final_rows.iter().enumerate() {
+                    self.ro.rewards[row] += self.cfg.gamma * self.fw.value(policy, k);
+                }
+            }
+            self.env_steps += n_env as u64;
+        }
+        Ok(())
+    }
+
+    /// Rollout step `t`: updates the observation statistics, then records every environment's
+    /// normalised observation, value, sampled action and its log-probability.
+    fn choose_actions(&mut self, policy: &mut NetPolicy, t: usize) -> Result<(), RunError> {
+        let (n_env, n_actions, act_dim) = (self.n_env, self.n_actions, self.act_dim);
+        if let Some(n) = &mut policy.obs_norm {
+            n.update(&self.raw, n_env);
+        }
+        self.normalise_current(policy);
+        for i in 0..n_env {
+            self.ro.obs.copy_row(t * n_env + i, &self.now, i);
+        }
+        self.fw.run(policy, &self.now);
+        #[allow(clippy::needless_range_loop)] // i indexes several parallel buffers
+        for i in 0..n_env {
+            let row = t * n_env + i;
+            self.ro.values[row] = self.fw.value(policy, i);
+            match &policy.head {
+                Head::Discrete(net) => {
+                    let logits = &net.logits()[i * n_actions..(i + 1) * n_actions];
+                    ensure(&mut self.fw.logp, n_actions);
+                    let lp = &mut self.fw.logp[..n_actions];
+                    if !masked::log_softmax(logits, self.now.mask(i), lp) {
+                        return Err(RunError::Policy(a2perf_core::PolicyError::NoLegalAction));
+                    }
+                    let a = masked::sample(lp, &mut self.rng)
+                        .ok_or(RunError::Policy(a2perf_core::PolicyError::NoLegalAction))?;
+                    self.ro.act_d[row] = a;
+                    self.ro.logp[row] = lp[a];
+                    self.actions[i] = Action::Discrete(a);
+                }
+                Head::Gaussian(g) => {
+                    let mean = &g.actor.output(&self.fw.actor)[i * act_dim..(i + 1) * act_dim];
+                    let log_std = &policy.params[g.log_std..g.log_std + act_dim];
+                    for (k, z) in self.noise.iter_mut().enumerate() {
+                        *z = mean[k] + log_std[k].exp() * self.rng.normal() as f32;
+                    }
+                    self.ro.act_c[row * act_dim..(row + 1) * act_dim].copy_from_slice(&self.noise);
+                    self.ro.logp[row] = gaussian::log_prob(mean, log_std, &self.noise);
+                    self.actions[i] =
+                        clip_action(&policy.action_space, &self.noise, &mut self.actions[i]);
+                }
+                Head::Squashed(_) => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// `now` = every environment's current observation, normalised.
+    fn normalise_current(&mut self, policy: &NetPolicy) {
+        self.now.resize(self.n_env);
+        for i in 0..self.n_env {
+            self.now.copy_row(i, &self.raw, i);
+            if let Some(n) = &policy.obs_norm {
+                n.apply(&mut self.now, i);
+            }
+        }
+    }
+
+    /// Generalised advantage estimation over the rollout, bootstrapped from the values of the
+    /// current observations; returns are advantages plus values.
+    fn compute_advantages(&mut self, policy: &mut NetPolicy) {
+        let n_env = self.n_env;
+        self.normalise_current(policy);
+        self.fw.run(policy, &self.now);
+        self.next_adv.fill(0.0);
+        for (i, v) in self.next_val.iter_mut().enumerate() {
+            *v = self.fw.value(policy, i);
+        }
+        let (cfg, ro) = (&self.cfg, &mut self.ro);
+        for t in (0..cfg.num_steps).rev() {
+            for i in 0..n_env {
+                let row = t * n_env + i;
+                let nonterminal = if ro.ended[row] { 0.0 } else { 1.0 };
+                let delta =
+                    ro.rewards[row] + cfg.gamma * self.next_val[i] * nonterminal - ro.values[row];
+                let a = delta + cfg.gamma * cfg.gae_lambda * nonterminal * self.next_adv[i];
+                ro.adv[row] = a;
+                ro.ret[row] = a + ro.values[row];
+                self.next_adv[i] = a;
+                self.next_val[i] = ro.values[row];
+            }
+        }
+    }
+
+    /// `num_epochs` passes over the rollout in shuffled minibatches.
+    fn optimise(&mut self, policy: &mut NetPolicy) {
+        let lr = self.cfg.lr.at(self.env_steps as f64 / self.total as f64);
+        let mbs = self.cfg.minibatch_size.min(self.rows);
+        // Out of `self` while its chunks are read, so that each step can borrow `self`.
+        let mut order = std::mem::take(&mut self.order);
+        for _ in 0..self.cfg.num_epochs {
+            self.mb_rng.shuffle(&mut order);
+            for chunk in order.chunks(mbs) {
+                self.minibatch_step(policy, chunk, lr);
+            }
+        }
+        self.order = order;
+    }
+
+    /// One gradient step on the rollout rows `chunk`: clipped surrogate, entropy bonus and
+    /// value regression.
+    fn minibatch_step(&mut self, policy: &mut NetPolicy, chunk: &[usize], lr: f32) {
+        self.mb.gather(&self.ro.obs, chunk);
+        self.fw.run(policy, &self.mb);
+        let bsz = chunk.len();
+        let adv = AdvantageNorm::of(&self.ro.adv, chunk);
+        let inv_b = 1.0 / bsz as f32;
+        self.grads.fill(0.0);
+        ensure(&mut self.dvalues, bsz);
+        for (k, &r) in chunk.iter().enumerate() {
+            let v = self.fw.value(policy, k);
+            self.dvalues[k] = 2.0 * self.cfg.value_coef * (v - self.ro.ret[r]) * inv_b;
+        }
+        match &mut policy.head {
+            Head::Discrete(net) => self.discrete_gradient(net, &policy.params, chunk, &adv),
+            Head::Gaussian(g) => self.gaussian_gradient(g, &policy.params, chunk, &adv),
+            Head::Squashed(_) => {}
+        }
+        clip_grad_norm(&mut self.grads, self.cfg.max_grad_norm);
+        self.adam.step(&mut policy.params, &self.grads, lr);
+    }
+
+    /// The gradient of a masked categorical policy and its value head (in `grads`), with the
+    /// minibatch's value gradients in `dvalues`.
+    fn discrete_gradient(
+        &mut self,
+        net: &mut DiscreteNet,
+        params: &[f32],
+        chunk: &[usize],
+        adv: &AdvantageNorm,
+    ) {
+        let (n_actions, bsz) = (self.n_actions, chunk.len());
+        let inv_b = 1.0 / bsz as f32;
+        ensure(&mut self.dlogits, bsz * n_actions);
+        self.dlogits[..bsz * n_actions].fill(0.0);
+        ensure(&mut self.fw.logp, n_actions);
+        for (k, &r) in chunk.iter().enumerate() {
+            let logits = &net.logits()[k * n_actions..(k + 1) * n_actions];
+            let lp = &mut self.fw.logp[..n_actions];
+            masked::log_softmax(logits, self.mb.mask(k), lp);
+            let a = self.ro.act_d[r];
+            let g = surrogate_grad(
+                lp[a],
+                self.ro.logp[r],
+                adv.apply(self.ro.adv[r]),
+                self.cfg.clip_ratio,
+            );
+            let dl = &mut self.dlogits[k * n_actions..(k + 1) * n_actions];
+            masked::grad_logp(lp, a, g * inv_b, dl);
+            masked::grad_entropy(lp, -self.cfg.entropy_coef * inv_b, dl);
+        }
+        net.backward(
+            params,
+            &mut self.grads,
+            &self.mb,
+            &self.dlogits,
+            Some(&self.dvalues),
+        );
+    }
+
+    /// The gradient of a diagonal Gaussian policy (mean network, log-std when learned) and
+    /// its value network (in `grads`).
+    fn gaussian_gradient(
+        &mut self,
+        g: &GaussianArch,
+        params: &[f32],
+        chunk: &[usize],
+        adv: &AdvantageNorm,
+    ) {
+        let (act_dim, bsz) = (self.act_dim, chunk.len());
+        let inv_b = 1.0 / bsz as f32;
+        ensure(&mut self.dmean, bsz * act_dim);
+        let log_std = &params[g.log_std..g.log_std + act_dim];
+        let means = g.actor.output(&self.fw.actor);
+        self.dlog_std.fill(0.0);
+        for (k, &r) in chunk.iter().enumerate() {
+            let mean = &means[k * act_dim..(k + 1) * act_dim];
+            let a = &self.ro.act_c[r * act_dim..(r + 1) * act_dim];
+            let lp = gaussian::log_prob(mean, log_std, a);
+            let gcoef = surrogate_grad(
+                lp,
+                self.ro.logp[r],
+                adv.apply(self.ro.adv[r]),
+                self.cfg.clip_ratio,
+            ) * inv_b;
+            let dm = &mut self.dmean[k * act_dim..(k + 1) * act_dim];
+            dm.fill(0.0);
+            gaussian::grad_log_prob(mean, log_std, a, gcoef, dm, &mut self.dlog_std);
+        }
+        for d in &mut self.dlog_std {
+            *d -= self.cfg.entropy_coef;
+        }
+        g.actor.backward(
+            params,
+            &mut self.grads,
+            &self.fw.x,
+            &self.dmean,
+            &mut self.fw.actor,
+            None,
+        );
+        if let Some(c) = &g.critic {
+            c.backward(
+                params,
+                &mut self.grads,
+                &self.fw.x,
+                &self.dvalues,
+                &mut self.fw.critic,
+                None,
+            );
+        }
+        if self.cfg.learn_log_std {
+            for (k, d) in self.dlog_std.iter().enumerate() {
+                self.grads[g.log_std + k] += d;
+            }
+        }
+    }
+}
+
+/// A minibatch's advantage statistics, to normalise its advantages (a single row is left as
+/// it is).
+struct AdvantageNorm {
+    mean: f64,
+    std: f64,
+    rows: usize,
+}
+
+impl AdvantageNorm {
+    fn of(adv: &[f32], chunk: &[usize]) -> Self {
+        let rows = chunk.len();
+        let (mut mean, mut std) = (0.0f64, 0.0f64);
+        for &r in chunk {
+            mean += f64::from(adv[r]);
+        }
+        mean /= rows as f64;
+        for &r in chunk {
+            std += (f64::from(adv[r]) - mean).powi(2);
+        }
+        std = (std / rows as f64).sqrt();
+        Self { mean, std, rows }
+    }
+
+    fn apply(&self, a: f32) -> f32 {
+        if self.rows > 1 {
+            ((f64::from(a) - self.mean) / (self.std + 1e-8)) as f32
+        } else {
+            a
+        }
+    }
+}
+
+/// ∂L/∂logπ(a) of the clipped surrogate −min(ρA, clip(ρ)A), with ρ = π(a)/π_old(a).
+fn surrogate_grad(logp_new: f32, logp_old: f32, a: f32, clip: f32) -> f32 {
+    let ratio = (logp_new - logp_old).exp();
+    let active = (a > 0.0 && ratio < 1.0 + clip) || (a < 0.0 && ratio > 1.0 - clip);
+    if active { -a * ratio } else { 0.0 }
 }
 
 /// Clips a continuous action to the space's bounds, reusing `slot`'s buffer.

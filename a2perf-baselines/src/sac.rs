@@ -3,8 +3,8 @@
 //! `SacAgent`. Actions are a tanh-squashed Gaussian mapped affinely onto the box bounds.
 
 use a2perf_core::{
-    Action, Algorithm, Control, ParamKind, ParamSpec, Params, Policy, RunError, Space,
-    TrainingContext, Value,
+    Action, Algorithm, Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError,
+    Space, TrainingContext, Value, VecEnv,
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
@@ -203,22 +203,113 @@ impl Algorithm for Sac {
     /// and its optimiser, the three random streams, the update credit, the whole replay buffer
     /// and every environment's current episode.
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
-        let cfg = self.config.clone();
         let resume = ctx.take_resume_state();
-        let (mut venv, spec) = make_vec_env(ctx)?;
-        let n_env = venv.len();
-        let d = match &spec.action_space {
-            Space::Box { low, high, .. } => {
-                if low.iter().chain(high).any(|x| !x.is_finite()) {
-                    return Err(RunError::Unsupported(
-                        "SAC needs finite action bounds to squash into".into(),
-                    ));
-                }
-                low.len()
+        let (venv, spec) = make_vec_env(ctx)?;
+        let (mut policy, mut run) = SacRun::new(self.config.clone(), venv, &spec, ctx)?;
+        match &resume {
+            Some(bytes) => run.restore(bytes, &mut policy, ctx)?,
+            None => write_observations(&mut run.cur, run.venv.reset_all()?)?,
+        }
+        loop {
+            run.choose_actions(&mut policy);
+            run.step_envs()?;
+            run.learn(&mut policy)?;
+            let save = |p: &NetPolicy| Ok(run.save_state(p));
+            if ctx.progress_resumable(run.env_steps, &mut policy, save)? == Control::Stop {
+                break;
             }
-            _ => return Err(RunError::Unsupported("SAC needs a box action space".into())),
-        };
-        let layout = ObsLayout::from_spec(&spec)?;
+        }
+        ctx.finish(run.env_steps, &mut policy)?;
+        run.venv.close()?;
+        Ok(Box::new(policy))
+    }
+}
+
+/// The bounds of a box action space, which SAC's squashed actions are mapped onto.
+fn squash_bounds(space: &Space) -> Result<(Vec<f32>, Vec<f32>), RunError> {
+    match space {
+        Space::Box { low, high, .. } => {
+            if low.iter().chain(high).any(|x| !x.is_finite()) {
+                return Err(RunError::Unsupported(
+                    "SAC needs finite action bounds to squash into".into(),
+                ));
+            }
+            Ok((
+                low.iter().map(|x| *x as f32).collect(),
+                high.iter().map(|x| *x as f32).collect(),
+            ))
+        }
+        _ => Err(RunError::Unsupported("SAC needs a box action space".into())),
+    }
+}
+
+/// Everything a SAC run updates besides the actor (the policy): the environments, the critics,
+/// the optimisers, the temperature, the replay, the random streams and the workspaces of the
+/// steps below.
+struct SacRun {
+    cfg: SacConfig,
+    venv: VecEnv,
+    n_env: usize,
+    /// Action dimensions.
+    d: usize,
+    /// Flattened observation dimensions.
+    od: usize,
+    low: Vec<f32>,
+    high: Vec<f32>,
+    actor: Mlp,
+    qnet: Mlp,
+    critics: Vec<Critic>,
+    actor_adam: Adam,
+    actor_grads: Vec<f32>,
+    log_alpha: f32,
+    alpha_adam: Adam,
+    target_entropy: f32,
+    replay: ReplayBuffer,
+    sample: ReplaySample,
+    idx: Vec<usize>,
+    rng: RngStream,
+    noise_rng: RngStream,
+    sample_rng: RngStream,
+    /// Every environment's current observation, raw (as the replay stores them).
+    cur: ObsBatch,
+    /// `cur` normalised for acting.
+    cur_n: ObsBatch,
+    actions: Vec<Action>,
+    /// The actions in [−1, 1] (before mapping onto the bounds), as the replay stores them.
+    a_norm: Vec<f32>,
+    ws_actor: MlpWs,
+    x: Vec<f32>,
+    xn: Vec<f32>,
+    qin: Vec<f32>,
+    eps: Vec<f32>,
+    a_pi: Vec<f32>,
+    logp: Vec<f32>,
+    y: Vec<f32>,
+    dq: Vec<f32>,
+    dqin: Vec<f32>,
+    dout: Vec<f32>,
+    scratch: Vec<f32>,
+    qa: Vec<f32>,
+    qb: Vec<f32>,
+    out_buf: Vec<f32>,
+    total: u64,
+    env_steps: u64,
+    /// Gradient updates earned and not yet made (`updates_per_step` per environment step).
+    credit: f32,
+}
+
+impl SacRun {
+    /// The untrained actor (as the policy) and critics for `spec`'s environments.
+    fn new(
+        cfg: SacConfig,
+        venv: VecEnv,
+        spec: &EnvSpec,
+        ctx: &TrainingContext<'_>,
+    ) -> Result<(NetPolicy, Self), RunError> {
+        let n_env = venv.len();
+        let (low, high) = squash_bounds(&spec.action_space)?;
+        let d = low.len();
+        let layout = ObsLayout::from_spec(spec)?;
         let od = layout.total_dim();
         let arch = SquashedArch::new(od, d, &cfg.hidden);
         let mut init = ctx.rng("sac/init");
@@ -229,7 +320,7 @@ impl Algorithm for Sac {
         qsizes.push(1);
         let mut qalloc = ParamAlloc::new();
         let qnet = Mlp::new(&mut qalloc, &qsizes, Activation::Relu);
-        let mut critics: Vec<Critic> = (0..2)
+        let critics: Vec<Critic> = (0..2)
             .map(|_| {
                 let mut p = vec![0.0; qalloc.len()];
                 qnet.init(&mut p, &mut init, 1.0);
@@ -246,7 +337,7 @@ impl Algorithm for Sac {
         let actor = arch.actor.clone();
         let mut policy = NetPolicy::new(
             "sac",
-            &spec,
+            spec,
             Head::Squashed(arch),
             actor_params,
             None,
@@ -256,313 +347,389 @@ impl Algorithm for Sac {
         if cfg.normalize_observations {
             policy.obs_norm = ObsNorm::for_head(&policy.head, &layout);
         }
-        let mut actor_adam = Adam::new(policy.params.len());
-        let mut actor_grads = vec![0.0f32; policy.params.len()];
-        let mut log_alpha = cfg.init_alpha.ln();
-        let mut alpha_adam = Adam::new(1);
-        let target_entropy = -(d as f32);
-
-        let mut replay = ReplayBuffer::new(&layout, cfg.replay_capacity, d);
-        let mut sample = ReplaySample::new(&layout);
-        let mut idx = Vec::new();
-        let mut rng = ctx.rng("sac/explore");
-        let mut noise_rng = ctx.rng("sac/update-noise");
-        let mut sample_rng = ctx.rng("sac/replay");
         let mut cur = ObsBatch::new(&layout);
-        // `cur` normalised for acting; the replay stores raw observations.
-        let mut cur_n = ObsBatch::new(&layout);
-        let mut actions = vec![Action::Continuous(vec![0.0; d]); n_env];
-        let mut a_norm = vec![0.0f32; n_env * d];
-        let mut ws_actor = MlpWs::default();
-        let (mut x, mut xn) = (Vec::new(), Vec::new());
-        let (mut qin, mut eps, mut a_pi, mut logp) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let (mut y, mut dq, mut dqin, mut dout, mut scratch) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let (low, high) = match &spec.action_space {
-            Space::Box { low, high, .. } => (
-                low.iter().map(|x| *x as f32).collect::<Vec<f32>>(),
-                high.iter().map(|x| *x as f32).collect::<Vec<f32>>(),
-            ),
-            _ => (Vec::new(), Vec::new()),
-        };
-        let (mut qa, mut qb, mut out_buf) = (Vec::new(), Vec::new(), Vec::new());
-        let total = ctx.settings().total_env_steps.max(1);
-        let mut env_steps = 0u64;
-        let mut credit = 0.0f32;
-
         cur.resize(n_env);
-        match &resume {
-            Some(bytes) => {
-                let mut r = StateReader::new(bytes, "sac", STATE_VERSION)?;
-                policy.load_training_state(&mut r)?;
-                for (k, c) in critics.iter_mut().enumerate() {
-                    r.f32s_into(&format!("critic {k} parameters"), &mut c.params)?;
-                    r.f32s_into(&format!("critic {k} target"), &mut c.target)?;
-                    c.adam.load(&format!("critic {k}"), &mut r)?;
-                }
-                actor_adam.load("actor", &mut r)?;
-                log_alpha = r.f32()?;
-                alpha_adam.load("temperature", &mut r)?;
-                rng = r.rng()?;
-                noise_rng = r.rng()?;
-                sample_rng = r.rng()?;
-                credit = r.f32()?;
-                env_steps = r.u64()?;
-                replay.load(&mut r)?;
-                for (i, out) in r.envs(&mut venv, &mut |m| ctx.warn(m))?.iter().enumerate() {
-                    cur.write_row(i, &out.step.observation)?;
-                }
-                r.finish()?;
-            }
-            None => {
-                for (i, out) in venv.reset_all()?.iter().enumerate() {
-                    cur.write_row(i, &out.step.observation)?;
-                }
-            }
-        }
-        loop {
-            if let Some(n) = &mut policy.obs_norm {
-                n.update(&cur, n_env);
-            }
-            if (env_steps as usize) < cfg.learning_starts {
-                for v in a_norm.iter_mut() {
-                    *v = rng.range(-1.0, 1.0) as f32;
-                }
-            } else {
-                match &policy.obs_norm {
-                    Some(n) => {
-                        cur_n.resize(n_env);
-                        for i in 0..n_env {
-                            cur_n.copy_row(i, &cur, i);
-                            n.apply(&mut cur_n, i);
-                        }
-                        cur_n.concat_into(&mut x);
-                    }
-                    None => cur.concat_into(&mut x),
-                }
-                let out = actor.forward(&policy.params, &x, n_env, &mut ws_actor);
-                ensure(&mut eps, d);
-                for i in 0..n_env {
-                    for e in eps[..d].iter_mut() {
-                        *e = rng.normal() as f32;
-                    }
-                    let row = &out[i * 2 * d..(i + 1) * 2 * d];
-                    tanh_gaussian::sample(
-                        &row[..d],
-                        &row[d..],
-                        &eps[..d],
-                        &mut a_norm[i * d..(i + 1) * d],
-                    );
-                }
-            }
-            for (i, slot) in actions.iter_mut().enumerate() {
-                if let Action::Continuous(v) = slot {
-                    for k in 0..d {
-                        v[k] =
-                            squash_to_bounds(a_norm[i * d + k], low[k], high[k], cfg.action_limit);
-                    }
-                }
-            }
-            let outs = venv.step_all(&actions)?;
-            for (i, out) in outs.iter().enumerate() {
-                let next = if out.step.done() {
-                    &out.final_observation
-                } else {
-                    &out.step.observation
-                };
-                replay.push(
-                    i,
-                    &cur,
-                    i,
-                    next,
-                    0,
-                    &a_norm[i * d..(i + 1) * d],
-                    out.step.reward as f32,
-                    out.step.terminated,
-                )?;
-            }
-            for (i, out) in outs.iter().enumerate() {
-                cur.write_row(i, &out.step.observation)?;
-            }
-            env_steps += n_env as u64;
+        let run = Self {
+            n_env,
+            d,
+            od,
+            low,
+            high,
+            actor,
+            qnet,
+            critics,
+            actor_adam: Adam::new(policy.params.len()),
+            actor_grads: vec![0.0; policy.params.len()],
+            log_alpha: cfg.init_alpha.ln(),
+            alpha_adam: Adam::new(1),
+            target_entropy: -(d as f32),
+            replay: ReplayBuffer::new(&layout, cfg.replay_capacity, d),
+            sample: ReplaySample::new(&layout),
+            idx: Vec::new(),
+            rng: ctx.rng("sac/explore"),
+            noise_rng: ctx.rng("sac/update-noise"),
+            sample_rng: ctx.rng("sac/replay"),
+            cur,
+            cur_n: ObsBatch::new(&layout),
+            actions: vec![Action::Continuous(vec![0.0; d]); n_env],
+            a_norm: vec![0.0; n_env * d],
+            ws_actor: MlpWs::default(),
+            x: Vec::new(),
+            xn: Vec::new(),
+            qin: Vec::new(),
+            eps: Vec::new(),
+            a_pi: Vec::new(),
+            logp: Vec::new(),
+            y: Vec::new(),
+            dq: Vec::new(),
+            dqin: Vec::new(),
+            dout: Vec::new(),
+            scratch: Vec::new(),
+            qa: Vec::new(),
+            qb: Vec::new(),
+            out_buf: Vec::new(),
+            total: ctx.settings().total_env_steps.max(1),
+            env_steps: 0,
+            credit: 0.0,
+            venv,
+            cfg,
+        };
+        Ok((policy, run))
+    }
 
-            if !replay.is_empty() && env_steps as usize >= cfg.learning_starts {
-                credit += cfg.updates_per_step * n_env as f32;
-                let lr = cfg.lr.at(env_steps as f64 / total as f64);
-                while credit >= 1.0 {
-                    credit -= 1.0;
-                    replay.sample(cfg.batch_size, &mut sample_rng, &mut idx, &mut sample);
-                    let b = sample.obs.len();
-                    if let Some(n) = &policy.obs_norm {
-                        for r in 0..b {
-                            n.apply(&mut sample.obs, r);
-                            n.apply(&mut sample.next, r);
-                        }
-                    }
-                    let alpha = log_alpha.exp();
-                    sample.obs.concat_into(&mut x);
-                    sample.next.concat_into(&mut xn);
-                    // Targets: y = r + γ(1−done)(min Q'(s', a') − α log π(a'|s')).
-                    let out = actor.forward(&policy.params, &xn, b, &mut ws_actor);
-                    ensure(&mut eps, b * d);
-                    ensure(&mut a_pi, b * d);
-                    ensure(&mut logp, b);
-                    for e in eps[..b * d].iter_mut() {
-                        *e = noise_rng.normal() as f32;
-                    }
-                    for k in 0..b {
-                        let row = &out[k * 2 * d..(k + 1) * 2 * d];
-                        logp[k] = tanh_gaussian::sample(
-                            &row[..d],
-                            &row[d..],
-                            &eps[k * d..(k + 1) * d],
-                            &mut a_pi[k * d..(k + 1) * d],
-                        );
-                    }
-                    concat_obs_action(&xn, &a_pi, b, od, d, &mut qin);
-                    ensure(&mut y, b);
-                    let (c0, c1) = critics.split_at_mut(1);
-                    let (c0, c1) = (&mut c0[0], &mut c1[0]);
-                    let q1 = qnet.forward(&c0.target, &qin, b, &mut c0.ws_t);
-                    let q2 = qnet.forward(&c1.target, &qin, b, &mut c1.ws_t);
-                    for k in 0..b {
-                        let boot = if sample.terminated[k] {
-                            0.0
-                        } else {
-                            q1[k].min(q2[k]) - alpha * logp[k]
-                        };
-                        y[k] = sample.rewards[k] + cfg.gamma * boot;
-                    }
-                    // Critic regression on the stored actions.
-                    concat_obs_action(&x, &sample.act_c, b, od, d, &mut qin);
-                    ensure(&mut dq, b);
-                    for c in critics.iter_mut() {
-                        let q = qnet.forward(&c.params, &qin, b, &mut c.ws);
-                        for k in 0..b {
-                            dq[k] = 2.0 * (q[k] - y[k]) / b as f32;
-                        }
-                        c.grads.fill(0.0);
-                        qnet.backward(&c.params, &mut c.grads, &qin, &dq, &mut c.ws, None);
-                        clip_grad_norm(&mut c.grads, cfg.max_grad_norm);
-                        c.adam.step(&mut c.params, &c.grads, lr);
-                    }
-                    // Actor: minimise α log π(a|s) − min Q(s, a), a reparameterised.
-                    ensure(&mut out_buf, b * 2 * d);
-                    out_buf[..b * 2 * d].copy_from_slice(actor.forward(
-                        &policy.params,
-                        &x,
-                        b,
-                        &mut ws_actor,
-                    ));
-                    let out = &out_buf;
-                    for e in eps[..b * d].iter_mut() {
-                        *e = noise_rng.normal() as f32;
-                    }
-                    for k in 0..b {
-                        let row = &out[k * 2 * d..(k + 1) * 2 * d];
-                        logp[k] = tanh_gaussian::sample(
-                            &row[..d],
-                            &row[d..],
-                            &eps[k * d..(k + 1) * d],
-                            &mut a_pi[k * d..(k + 1) * d],
-                        );
-                    }
-                    concat_obs_action(&x, &a_pi, b, od, d, &mut qin);
-                    ensure(&mut qa, b);
-                    ensure(&mut qb, b);
-                    {
-                        let (c0, c1) = critics.split_at_mut(1);
-                        let (c0, c1) = (&mut c0[0], &mut c1[0]);
-                        qa[..b].copy_from_slice(qnet.forward(&c0.params, &qin, b, &mut c0.ws));
-                        qb[..b].copy_from_slice(qnet.forward(&c1.params, &qin, b, &mut c1.ws));
-                    }
-                    ensure(&mut dqin, b * (od + d));
-                    ensure(&mut scratch, critics[0].params.len());
-                    ensure(&mut dout, b * 2 * d);
-                    dout[..b * 2 * d].fill(0.0);
-                    for (ci, c) in critics.iter_mut().enumerate() {
-                        // Gradient flows through whichever critic is the minimum for each row.
-                        for k in 0..b {
-                            let pick = if qa[k] <= qb[k] { 0 } else { 1 };
-                            dq[k] = if pick == ci { -1.0 / b as f32 } else { 0.0 };
-                        }
-                        scratch.fill(0.0);
-                        qnet.backward(
-                            &c.params,
-                            &mut scratch,
-                            &qin,
-                            &dq,
-                            &mut c.ws,
-                            Some(&mut dqin),
-                        );
-                        for k in 0..b {
-                            let da = &dqin[k * (od + d) + od..(k + 1) * (od + d)];
-                            let row = &out[k * 2 * d..(k + 1) * 2 * d];
-                            let (dm, dr) = dout[k * 2 * d..(k + 1) * 2 * d].split_at_mut(d);
-                            let dlogp = if ci == 0 { alpha / b as f32 } else { 0.0 };
-                            tanh_gaussian::backward(
-                                &row[..d],
-                                &row[d..],
-                                &eps[k * d..(k + 1) * d],
-                                da,
-                                dlogp,
-                                dm,
-                                dr,
-                            );
-                        }
-                    }
-                    actor_grads.fill(0.0);
-                    actor.backward(
-                        &policy.params,
-                        &mut actor_grads,
-                        &x,
-                        &dout,
-                        &mut ws_actor,
-                        None,
-                    );
-                    clip_grad_norm(&mut actor_grads, cfg.max_grad_norm);
-                    actor_adam.step(&mut policy.params, &actor_grads, lr);
-                    // Temperature: minimise −log α · (log π + target entropy).
-                    let mean_lp = logp[..b].iter().map(|l| f64::from(*l)).sum::<f64>() / b as f64;
-                    let g = -(mean_lp as f32 + target_entropy);
-                    let mut la = [log_alpha];
-                    alpha_adam.step(&mut la, &[g], lr);
-                    log_alpha = la[0];
-                    for c in critics.iter_mut() {
-                        polyak(&mut c.target, &c.params, cfg.tau);
-                    }
-                }
-                check_finite("SAC actor", &policy.params)?;
-                check_finite("SAC critic", &critics[0].params)?;
+    /// Continues from a state written by [`save_state`](Self::save_state).
+    fn restore(
+        &mut self,
+        bytes: &[u8],
+        policy: &mut NetPolicy,
+        ctx: &mut TrainingContext<'_>,
+    ) -> Result<(), RunError> {
+        let mut r = StateReader::new(bytes, "sac", STATE_VERSION)?;
+        policy.load_training_state(&mut r)?;
+        for (k, c) in self.critics.iter_mut().enumerate() {
+            r.f32s_into(&format!("critic {k} parameters"), &mut c.params)?;
+            r.f32s_into(&format!("critic {k} target"), &mut c.target)?;
+            c.adam.load(&format!("critic {k}"), &mut r)?;
+        }
+        self.actor_adam.load("actor", &mut r)?;
+        self.log_alpha = r.f32()?;
+        self.alpha_adam.load("temperature", &mut r)?;
+        self.rng = r.rng()?;
+        self.noise_rng = r.rng()?;
+        self.sample_rng = r.rng()?;
+        self.credit = r.f32()?;
+        self.env_steps = r.u64()?;
+        self.replay.load(&mut r)?;
+        write_observations(&mut self.cur, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
+        r.finish()
+    }
+
+    /// The state [`restore`](Self::restore) continues from.
+    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+        let mut w = StateWriter::new("sac", STATE_VERSION);
+        policy.save_training_state(&mut w);
+        for c in &self.critics {
+            w.f32s(&c.params);
+            w.f32s(&c.target);
+            c.adam.save(&mut w);
+        }
+        self.actor_adam.save(&mut w);
+        w.f32(self.log_alpha);
+        self.alpha_adam.save(&mut w);
+        w.rng(&self.rng);
+        w.rng(&self.noise_rng);
+        w.rng(&self.sample_rng);
+        w.f32(self.credit);
+        w.u64(self.env_steps);
+        self.replay.save(&mut w);
+        w.envs(&self.venv);
+        w.finish()
+    }
+
+    /// Updates the observation statistics and picks every environment's action: uniformly
+    /// random before `learning_starts`, then sampled from the squashed Gaussian.
+    fn choose_actions(&mut self, policy: &mut NetPolicy) {
+        let (n_env, d) = (self.n_env, self.d);
+        if let Some(n) = &mut policy.obs_norm {
+            n.update(&self.cur, n_env);
+        }
+        if (self.env_steps as usize) < self.cfg.learning_starts {
+            for v in self.a_norm.iter_mut() {
+                *v = self.rng.range(-1.0, 1.0) as f32;
             }
-            let save = |p: &NetPolicy| {
-                let mut w = StateWriter::new("sac", STATE_VERSION);
-                p.save_training_state(&mut w);
-                for c in &critics {
-                    w.f32s(&c.params);
-                    w.f32s(&c.target);
-                    c.adam.save(&mut w);
+        } else {
+            match &policy.obs_norm {
+                Some(n) => {
+                    self.cur_n.resize(n_env);
+                    for i in 0..n_env {
+                        self.cur_n.copy_row(i, &self.cur, i);
+                        n.apply(&mut self.cur_n, i);
+                    }
+                    self.cur_n.concat_into(&mut self.x);
                 }
-                actor_adam.save(&mut w);
-                w.f32(log_alpha);
-                alpha_adam.save(&mut w);
-                w.rng(&rng);
-                w.rng(&noise_rng);
-                w.rng(&sample_rng);
-                w.f32(credit);
-                w.u64(env_steps);
-                replay.save(&mut w);
-                w.envs(&venv);
-                Ok(w.finish())
-            };
-            if ctx.progress_resumable(env_steps, &mut policy, save)? == Control::Stop {
-                break;
+                None => self.cur.concat_into(&mut self.x),
+            }
+            let out = self
+                .actor
+                .forward(&policy.params, &self.x, n_env, &mut self.ws_actor);
+            ensure(&mut self.eps, d);
+            for i in 0..n_env {
+                for e in self.eps[..d].iter_mut() {
+                    *e = self.rng.normal() as f32;
+                }
+                let row = &out[i * 2 * d..(i + 1) * 2 * d];
+                tanh_gaussian::sample(
+                    &row[..d],
+                    &row[d..],
+                    &self.eps[..d],
+                    &mut self.a_norm[i * d..(i + 1) * d],
+                );
             }
         }
-        ctx.finish(env_steps, &mut policy)?;
-        venv.close()?;
-        Ok(Box::new(policy))
+        for (i, slot) in self.actions.iter_mut().enumerate() {
+            if let Action::Continuous(v) = slot {
+                for k in 0..d {
+                    v[k] = squash_to_bounds(
+                        self.a_norm[i * d + k],
+                        self.low[k],
+                        self.high[k],
+                        self.cfg.action_limit,
+                    );
+                }
+            }
+        }
+    }
+
+    /// Steps every environment with the chosen actions, storing the transitions.
+    fn step_envs(&mut self) -> Result<(), RunError> {
+        let outs = self.venv.step_all(&self.actions)?;
+        let d = self.d;
+        push_transitions(
+            &mut self.replay,
+            &mut self.cur,
+            outs,
+            |_| 0,
+            &self.a_norm,
+            d,
+        )?;
+        self.env_steps += self.n_env as u64;
+        Ok(())
+    }
+
+    /// The gradient updates earned by the last step, once learning has started.
+    fn learn(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+        if self.replay.is_empty() || (self.env_steps as usize) < self.cfg.learning_starts {
+            return Ok(());
+        }
+        self.credit += self.cfg.updates_per_step * self.n_env as f32;
+        let lr = self.cfg.lr.at(self.env_steps as f64 / self.total as f64);
+        while self.credit >= 1.0 {
+            self.credit -= 1.0;
+            self.update(policy, lr);
+        }
+        check_finite("SAC actor", &policy.params)?;
+        check_finite("SAC critic", &self.critics[0].params)
+    }
+
+    /// One update on a replay minibatch: critics, actor, temperature, then the targets.
+    fn update(&mut self, policy: &mut NetPolicy, lr: f32) {
+        self.replay.sample(
+            self.cfg.batch_size,
+            &mut self.sample_rng,
+            &mut self.idx,
+            &mut self.sample,
+        );
+        let b = self.sample.obs.len();
+        if let Some(n) = &policy.obs_norm {
+            for r in 0..b {
+                n.apply(&mut self.sample.obs, r);
+                n.apply(&mut self.sample.next, r);
+            }
+        }
+        let alpha = self.log_alpha.exp();
+        self.sample.obs.concat_into(&mut self.x);
+        self.sample.next.concat_into(&mut self.xn);
+        self.critic_targets(policy, b, alpha);
+        self.critic_step(b, lr);
+        self.actor_step(policy, b, alpha, lr);
+        // Temperature: minimise −log α · (log π + target entropy).
+        let mean_lp = self.logp[..b].iter().map(|l| f64::from(*l)).sum::<f64>() / b as f64;
+        let g = -(mean_lp as f32 + self.target_entropy);
+        let mut la = [self.log_alpha];
+        self.alpha_adam.step(&mut la, &[g], lr);
+        self.log_alpha = la[0];
+        for c in self.critics.iter_mut() {
+            polyak(&mut c.target, &c.params, self.cfg.tau);
+        }
+    }
+
+    /// `y` = r + γ(1−done)(min Q'(s', a') − α log π(a'|s')), with a' sampled from the actor.
+    fn critic_targets(&mut self, policy: &NetPolicy, b: usize, alpha: f32) {
+        let (d, od) = (self.d, self.od);
+        let out = self
+            .actor
+            .forward(&policy.params, &self.xn, b, &mut self.ws_actor);
+        ensure(&mut self.eps, b * d);
+        ensure(&mut self.a_pi, b * d);
+        ensure(&mut self.logp, b);
+        sample_squashed(
+            out,
+            b,
+            d,
+            &mut self.noise_rng,
+            &mut self.eps,
+            &mut self.a_pi,
+            &mut self.logp,
+        );
+        concat_obs_action(&self.xn, &self.a_pi, b, od, d, &mut self.qin);
+        ensure(&mut self.y, b);
+        let (c0, c1) = self.critics.split_at_mut(1);
+        let (c0, c1) = (&mut c0[0], &mut c1[0]);
+        let q1 = self.qnet.forward(&c0.target, &self.qin, b, &mut c0.ws_t);
+        let q2 = self.qnet.forward(&c1.target, &self.qin, b, &mut c1.ws_t);
+        for k in 0..b {
+            let boot = if self.sample.terminated[k] {
+                0.0
+            } else {
+                q1[k].min(q2[k]) - alpha * self.logp[k]
+            };
+            self.y[k] = self.sample.rewards[k] + self.cfg.gamma * boot;
+        }
+    }
+
+    /// Both critics regress on `y` at the stored actions.
+    fn critic_step(&mut self, b: usize, lr: f32) {
+        concat_obs_action(
+            &self.x,
+            &self.sample.act_c,
+            b,
+            self.od,
+            self.d,
+            &mut self.qin,
+        );
+        ensure(&mut self.dq, b);
+        for c in self.critics.iter_mut() {
+            let q = self.qnet.forward(&c.params, &self.qin, b, &mut c.ws);
+            for k in 0..b {
+                self.dq[k] = 2.0 * (q[k] - self.y[k]) / b as f32;
+            }
+            c.grads.fill(0.0);
+            self.qnet.backward(
+                &c.params,
+                &mut c.grads,
+                &self.qin,
+                &self.dq,
+                &mut c.ws,
+                None,
+            );
+            clip_grad_norm(&mut c.grads, self.cfg.max_grad_norm);
+            c.adam.step(&mut c.params, &c.grads, lr);
+        }
+    }
+
+    /// The actor minimises α log π(a|s) − min Q(s, a), with a reparameterised; leaves the
+    /// log-probabilities of its actions in `logp` for the temperature.
+    fn actor_step(&mut self, policy: &mut NetPolicy, b: usize, alpha: f32, lr: f32) {
+        let (d, od) = (self.d, self.od);
+        ensure(&mut self.out_buf, b * 2 * d);
+        self.out_buf[..b * 2 * d].copy_from_slice(self.actor.forward(
+            &policy.params,
+            &self.x,
+            b,
+            &mut self.ws_actor,
+        ));
+        let out = &self.out_buf;
+        sample_squashed(
+            out,
+            b,
+            d,
+            &mut self.noise_rng,
+            &mut self.eps,
+            &mut self.a_pi,
+            &mut self.logp,
+        );
+        concat_obs_action(&self.x, &self.a_pi, b, od, d, &mut self.qin);
+        ensure(&mut self.qa, b);
+        ensure(&mut self.qb, b);
+        {
+            let (c0, c1) = self.critics.split_at_mut(1);
+            let (c0, c1) = (&mut c0[0], &mut c1[0]);
+            self.qa[..b].copy_from_slice(self.qnet.forward(&c0.params, &self.qin, b, &mut c0.ws));
+            self.qb[..b].copy_from_slice(self.qnet.forward(&c1.params, &self.qin, b, &mut c1.ws));
+        }
+        ensure(&mut self.dqin, b * (od + d));
+        ensure(&mut self.scratch, self.critics[0].params.len());
+        ensure(&mut self.dout, b * 2 * d);
+        self.dout[..b * 2 * d].fill(0.0);
+        for (ci, c) in self.critics.iter_mut().enumerate() {
+            // Gradient flows through whichever critic is the minimum for each row.
+            for k in 0..b {
+                let pick = if self.qa[k] <= self.qb[k] { 0 } else { 1 };
+                self.dq[k] = if pick == ci { -1.0 / b as f32 } else { 0.0 };
+            }
+            self.scratch.fill(0.0);
+            self.qnet.backward(
+                &c.params,
+                &mut self.scratch,
+                &self.qin,
+                &self.dq,
+                &mut c.ws,
+                Some(&mut self.dqin),
+            );
+            for k in 0..b {
+                let da = &self.dqin[k * (od + d) + od..(k + 1) * (od + d)];
+                let row = &out[k * 2 * d..(k + 1) * 2 * d];
+                let (dm, dr) = self.dout[k * 2 * d..(k + 1) * 2 * d].split_at_mut(d);
+                let dlogp = if ci == 0 { alpha / b as f32 } else { 0.0 };
+                tanh_gaussian::backward(
+                    &row[..d],
+                    &row[d..],
+                    &self.eps[k * d..(k + 1) * d],
+                    da,
+                    dlogp,
+                    dm,
+                    dr,
+                );
+            }
+        }
+        self.actor_grads.fill(0.0);
+        self.actor.backward(
+            &policy.params,
+            &mut self.actor_grads,
+            &self.x,
+            &self.dout,
+            &mut self.ws_actor,
+            None,
+        );
+        clip_grad_norm(&mut self.actor_grads, self.cfg.max_grad_norm);
+        self.actor_adam
+            .step(&mut policy.params, &self.actor_grads, lr);
+    }
+}
+
+/// Reparameterised actions of the `b` actor rows `out` (`[mean | raw log-std]` each): fresh
+/// noise from `rng` into `eps`, the squashed actions into `a_pi`, their log-probabilities into
+/// `logp`.
+fn sample_squashed(
+    out: &[f32],
+    b: usize,
+    d: usize,
+    rng: &mut RngStream,
+    eps: &mut [f32],
+    a_pi: &mut [f32],
+    logp: &mut [f32],
+) {
+    for e in eps[..b * d].iter_mut() {
+        *e = rng.normal() as f32;
+    }
+    for k in 0..b {
+        let row = &out[k * 2 * d..(k + 1) * 2 * d];
+        logp[k] = tanh_gaussian::sample(
+            &row[..d],
+            &row[d..],
+            &eps[k * d..(k + 1) * d],
+            &mut a_pi[k * d..(k + 1) * d],
+        );
     }
 }
 

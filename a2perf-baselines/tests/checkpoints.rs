@@ -227,3 +227,29 @@ fn training_does_not_depend_on_eval_or_checkpoint_intervals() {
         );
     }
 }
+
+/// The trained policies' bytes, pinned: a refactoring of the algorithms must keep every
+/// floating-point operation and its order, so these fingerprints must not move. They were
+/// computed from the code at commit 9603bb3, before the training loops were split into named
+/// steps (issue 35); `resume.rs` pins the domain runs the same way.
+#[test]
+fn trained_policies_match_the_pinned_fingerprints() {
+    let pinned: [u64; 5] = [
+        0xae30_2762_6c0b_acea,
+        0x5736_cc0b_1664_d8f1,
+        0x6b8b_bbdb_2420_7c4c,
+        0x4675_813f_bc79_eb02,
+        0xa8a0_743e_bee4_1ff5,
+    ];
+    let got: Vec<u64> = online_variants()
+        .into_iter()
+        .map(|(name, continuous, extra)| {
+            let (policy, _) = trained_with(name, continuous, &extra);
+            fingerprint([policy.checkpoint().unwrap().to_bytes().as_slice()])
+        })
+        .collect();
+    println!("fingerprints: {got:#018x?}");
+    if reproduces_pinned_bits("trained_policies_match_the_pinned_fingerprints") {
+        assert_eq!(got, pinned, "{:?}", online_variants());
+    }
+}

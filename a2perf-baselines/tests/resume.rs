@@ -15,7 +15,9 @@ use std::sync::Arc;
 
 use a2perf_baselines::dataset::JsonDatasetFile;
 use a2perf_baselines::{Bc, Dataset, DatasetLoader};
-use common::{domains_registry, env_params, ints, skip_in_debug};
+use common::{
+    domains_registry, env_params, fingerprint, ints, reproduces_pinned_bits, skip_in_debug,
+};
 
 use a2perf_core::{
     ActMode, CancelToken, Checkpoint, CheckpointSink, Env, EnvError, Params, Policy, RandomPolicy,
@@ -163,6 +165,7 @@ impl Case {
                 .iter()
                 .all(|s| *s >= interval && *s < self.settings.total_env_steps)
         );
+        self.check_pinned(&clean, &clean_sink);
         let sizes: Vec<usize> = clean_sink.points.iter().map(|p| p.state.len()).collect();
         println!(
             "{} on {}: resume points at {boundaries:?}, algorithm state {sizes:?} bytes",
@@ -239,6 +242,57 @@ impl Case {
         check_same(mid, "resumed after a mid-interval interruption");
     }
 }
+
+impl Case {
+    /// Compares the uninterrupted run (final policy, curve, inference returns, every interval
+    /// checkpoint and every resume point's algorithm state) with its pinned fingerprint.
+    fn check_pinned(&self, clean: &Trained, sink: &Memory) {
+        let curve: Vec<u8> = clean
+            .curve
+            .iter()
+            .chain(std::iter::once(&(0, 0, 0)))
+            .flat_map(|(s, m, d)| [*s, *m, *d])
+            .chain(clean.inference.iter().copied())
+            .flat_map(u64::to_le_bytes)
+            .collect();
+        let steps: Vec<u8> = sink
+            .checkpoints
+            .iter()
+            .map(|(s, _)| *s)
+            .chain(sink.points.iter().map(|p| p.progress.env_steps))
+            .flat_map(u64::to_le_bytes)
+            .collect();
+        let got = fingerprint(
+            [clean.policy.as_slice(), &curve, &steps]
+                .into_iter()
+                .chain(sink.checkpoints.iter().map(|(_, c)| c.as_slice()))
+                .chain(sink.points.iter().map(|p| p.state.as_slice())),
+        );
+        let what = format!("{} on {}", self.algorithm, self.env_id);
+        println!("{what}: fingerprint {got:#018x}");
+        if reproduces_pinned_bits(&what) {
+            let pinned = PINNED
+                .iter()
+                .find(|(a, e, _)| *a == self.algorithm && *e == self.env_id)
+                .map(|(_, _, h)| *h);
+            assert_eq!(Some(got), pinned, "{what}: the training output moved");
+        }
+    }
+}
+
+/// Fingerprints of the uninterrupted runs (see [`Case::check_pinned`]), computed from the code
+/// at commit 9603bb3, before the training loops were split into named steps (issue 35): a
+/// refactoring must keep every floating-point operation and its order.
+const PINNED: &[(&str, &str, u64)] = &[
+    ("ppo", CIRCUIT, 0x818e_a4fd_7f54_92a7),
+    ("ppo", PACE, 0xa78f_0441_b010_cfe4),
+    ("ppo", WEB, 0x704a_b79a_0fb6_d0e0),
+    ("ddqn", WEB, 0x8a6c_056b_a8ba_e53f),
+    ("ddqn", CIRCUIT, 0xbd5b_2bd7_0775_0589),
+    ("sac", PACE, 0xa168_15bf_3214_bbe7),
+    ("bc", CIRCUIT, 0x7650_c373_7cd4_7fbf),
+    ("bc", PACE, 0x9852_e93f_925c_9502),
+];
 
 const CIRCUIT: &str = "CircuitTraining-Synthetic-Small-v0";
 const WEB: &str = "WebNavigation-Difficulty-01-v0";

@@ -8,7 +8,9 @@
 //! - [`Space`], [`Observation`], [`Action`]: discrete (with action masks), box and dict spaces;
 //!   [`Tensor`]s hold their values in the box's [`DType`] (`int32` ids, `float32` features).
 //! - [`Policy`], [`Algorithm`], [`TrainingContext`]: how algorithms train and report their curves
-//!   and checkpoints; [`rollout()`](crate::rollout::rollout) runs one episode.
+//!   and checkpoints; [`rollout()`](crate::rollout::rollout) runs one episode; [`Checkpoint`]:
+//!   a serialised policy in its self-checking container ([`checkpoint`]); [`CancelToken`]: Ctrl-C
+//!   and SIGTERM reaching the training runs.
 //! - [`Meter`]: anything that measures a phase, composable with [`MeterSet`].
 //! - [`Registry`]: environment ids and algorithm names mapped to typed constructors.
 //! - [`RngStream`]: every random number, keyed by (seed, purpose).
@@ -34,9 +36,13 @@
 
 pub mod alloc_count;
 pub mod bytes;
+pub mod cancel;
+pub mod checkpoint;
 pub mod config;
 pub mod crew;
+pub mod curve;
 pub mod env;
+pub mod error;
 pub mod meter;
 pub mod policy;
 pub mod registry;
@@ -47,17 +53,18 @@ pub mod rng;
 pub mod rollout;
 pub mod space;
 pub mod tensor;
+pub mod training;
 pub mod value;
 pub mod vec_env;
 
+pub use cancel::CancelToken;
+pub use checkpoint::Checkpoint;
 pub use config::{ConfigError, Experiment, Override};
+pub use curve::{CurvePoint, LearningCurve};
 pub use env::{Env, EnvError, EnvSpec, Info, Step};
+pub use error::{PolicyError, RunError};
 pub use meter::{Measurement, Meter, MeterError, MeterReport, MeterSet, Provenance};
-pub use policy::{
-    Algorithm, CancelToken, Checkpoint, CheckpointSink, Control, CurvePoint, DirectoryCheckpoints,
-    DiscardCheckpoints, EnvFactory, LearningCurve, Policy, PolicyError, PolicyLoader, RandomPolicy,
-    RunError, TrainingContext, TrainingSettings,
-};
+pub use policy::{ActMode, Policy, PolicyLoader, RandomPolicy};
 pub use registry::{
     AlgorithmConstructor, AlgorithmEntry, EnvConstructor, EnvEntry, Registry, RegistryError,
     TaskRef,
@@ -68,8 +75,12 @@ pub use results::{
 };
 pub use resume::{NewestResume, ResumeDir, ResumePoint, ResumeWrite, TrainingProgress};
 pub use rng::{RngState, RngStream};
-pub use rollout::{ActMode, Episode, Transition, rollout};
+pub use rollout::{Episode, Transition, rollout};
 pub use space::{Action, Observation, Space};
 pub use tensor::{DType, Tensor, TensorData};
+pub use training::{
+    Algorithm, CheckpointSink, Control, DirectoryCheckpoints, DiscardCheckpoints, EnvFactory,
+    TrainingContext, TrainingSettings,
+};
 pub use value::{ParamError, ParamKind, ParamSpec, Params, Value, did_you_mean};
 pub use vec_env::{EpisodeSnapshot, VecEnv, VecEnvSnapshot, VecStep, observation_hash};

@@ -7,7 +7,9 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::env::{Env, EnvError};
-use crate::policy::{Algorithm, PolicyLoader, RunError};
+use crate::error::RunError;
+use crate::policy::PolicyLoader;
+use crate::training::Algorithm;
 use crate::value::{ParamError, ParamSpec, Params, Value, did_you_mean};
 
 /// Constructor of an environment from resolved parameters.

@@ -25,7 +25,9 @@
 use std::path::{Path, PathBuf};
 
 use crate::bytes::ByteReader;
-use crate::policy::{Checkpoint, CurvePoint, LearningCurve, PolicyError};
+use crate::checkpoint::Checkpoint;
+use crate::curve::{CurvePoint, LearningCurve};
+use crate::error::PolicyError;
 
 /// Version of the resume-point payload written by [`ResumePoint::to_bytes`].
 pub const RESUME_FORMAT_VERSION: u32 = 1;
@@ -111,7 +113,7 @@ impl ResumePoint {
             }
         }
         head.extend_from_slice(&(self.state.len() as u64).to_le_bytes());
-        crate::policy::write_container(
+        crate::checkpoint::write_container(
             w,
             CONTAINER_NAME,
             RESUME_FORMAT_VERSION,

@@ -3,17 +3,12 @@
 use serde::{Deserialize, Serialize};
 
 use crate::env::{Env, Step};
-use crate::policy::{Policy, RunError};
+use crate::error::RunError;
+use crate::policy::Policy;
 use crate::space::{Action, Observation};
 
-/// How a policy chooses actions.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum ActMode {
-    /// Deterministic best action (evaluation, inference).
-    Greedy,
-    /// Sampled action (data collection, training).
-    Explore,
-}
+/// The old path of [`ActMode`], kept for users of `a2perf_core::rollout::ActMode`.
+pub use crate::policy::ActMode;
 
 /// One recorded step of an episode.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

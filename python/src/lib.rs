@@ -37,6 +37,7 @@ pub mod env;
 pub mod errors;
 pub mod harness;
 pub mod metrics;
+pub mod observation;
 pub mod policy;
 pub mod vec_env;
 

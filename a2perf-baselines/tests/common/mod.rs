@@ -414,3 +414,28 @@ pub fn env_params(pairs: &[(&str, Value)]) -> BTreeMap<String, Value> {
         .map(|(k, v)| (k.to_string(), v.clone()))
         .collect()
 }
+
+/// FNV-1a (64-bit) over the concatenation of `parts`: a short fingerprint of training output
+/// for the tests that pin it.
+pub fn fingerprint<'a>(parts: impl IntoIterator<Item = &'a [u8]>) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in parts.into_iter().flatten() {
+        h ^= u64::from(*b);
+        h = h.wrapping_mul(0x0000_0100_0000_01B3);
+    }
+    h
+}
+
+/// Whether this machine should reproduce the pinned training fingerprints bit for bit. They
+/// were taken on an x86_64 machine with AVX-512; faer picks its matrix kernels by CPU features
+/// at run time, and other kernels may round differently (still deterministic on one machine).
+pub fn reproduces_pinned_bits(name: &str) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        return true;
+    }
+    println!(
+        "{name}: the pinned fingerprints come from an x86_64 machine with AVX-512; not compared here"
+    );
+    false
+}

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use super::error::{ConfigError, Location};
 use super::profile::{Profile, parse_profile, parse_tasks, tasks_to_value};
 use super::syntax::{Field, Node, NodeValue};
-use crate::policy::TrainingSettings;
 use crate::registry::{Registry, TaskRef};
+use crate::training::TrainingSettings;
 use crate::value::{ParamKind, ParamSpec, Params, Value, did_you_mean};
 
 /// The file name pipelines write the operative config to, next to their results.

@@ -8,7 +8,7 @@ use proptest::prelude::*;
 
 use super::*;
 use crate::env::EnvError;
-use crate::policy::{PolicyError, RunError};
+use crate::error::{PolicyError, RunError};
 use crate::registry::{AlgorithmEntry, EnvEntry};
 use crate::value::{ParamKind, ParamSpec, Value};
 
