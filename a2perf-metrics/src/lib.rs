@@ -13,6 +13,7 @@
 //!   bootstrap confidence intervals and performance profiles.
 //! - [`filter`]: SciPy-compatible Butterworth design and `filtfilt`.
 //! - [`numeric`]: NumPy-compatible percentiles, IQR, CVaR, ranks.
+//! - [`bootstrap`]: the percentile bootstrap of `a2perf report` (one sequential stream).
 //! - [`application`]: returns summaries, generalization, training sample cost, expertise levels.
 //! - [`system`]: meters for RAM, CPU/RAM energy (RAPL or CodeCarbon-style estimates), emissions,
 //!   `emissions.csv` and inference time, implementing [`a2perf_core::Meter`]; [`gpu`]: GPU
@@ -38,6 +39,7 @@
 
 pub mod a2perf;
 pub mod application;
+pub mod bootstrap;
 pub mod chan2019;
 pub mod chan2019_stats;
 pub mod csv;

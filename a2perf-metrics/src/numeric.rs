@@ -78,6 +78,85 @@ pub fn pairwise_sum(x: &[f64]) -> f64 {
     }
 }
 
+/// Left-to-right sum, exactly as `Iterator::sum` (which starts from −0.0, so a sum of negative
+/// zeros stays −0.0).
+///
+/// NumPy sums pairwise ([`pairwise_sum`]); the two agree for fewer than 8 values, up to the
+/// sign of a zero sum. `a2perf report` and the run summaries have always summed this way, so
+/// their files keep their bytes by using it.
+///
+/// ```
+/// use a2perf_metrics::numeric::sequential_sum;
+/// assert_eq!(sequential_sum(&[1.0, 2.0, 3.0]), 6.0);
+/// assert!(sequential_sum(&[-0.0]).is_sign_negative());
+/// ```
+pub fn sequential_sum(x: &[f64]) -> f64 {
+    x.iter().sum()
+}
+
+/// Mean by [`sequential_sum`] (NaN for an empty slice): [`mean`] with the summation order of
+/// `a2perf report` and the run summaries instead of NumPy's.
+///
+/// ```
+/// assert_eq!(a2perf_metrics::numeric::mean_sequential(&[1.0, 2.0, 6.0]), 3.0);
+/// assert!(a2perf_metrics::numeric::mean_sequential(&[]).is_nan());
+/// ```
+pub fn mean_sequential(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        return f64::NAN;
+    }
+    sequential_sum(x) / x.len() as f64
+}
+
+/// Variance (`np.var(x, ddof=ddof)`) summed by [`sequential_sum`] (NaN when `len <= ddof`),
+/// the summation order of `a2perf report` and the run summaries.
+///
+/// ```
+/// assert_eq!(a2perf_metrics::numeric::var_sequential(&[1.0, 3.0], 1), 2.0);
+/// assert!(a2perf_metrics::numeric::var_sequential(&[1.0], 1).is_nan());
+/// ```
+pub fn var_sequential(x: &[f64], ddof: usize) -> f64 {
+    if x.len() <= ddof {
+        return f64::NAN;
+    }
+    let m = mean_sequential(x);
+    x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (x.len() - ddof) as f64
+}
+
+/// [`std`] summed by [`sequential_sum`]: the square root of [`var_sequential`].
+///
+/// ```
+/// let s = a2perf_metrics::numeric::std_sequential(&[1.0, 3.0], 1);
+/// assert_eq!(s, 2f64.sqrt());
+/// assert_eq!(a2perf_metrics::numeric::std_sequential(&[5.0], 0), 0.0);
+/// ```
+pub fn std_sequential(x: &[f64], ddof: usize) -> f64 {
+    var_sequential(x, ddof).sqrt()
+}
+
+/// The two-sided 95% Student-t quantile (`t.ppf(0.975, df)`) to three decimals, for the
+/// t-interval of a mean over `df + 1` values; the normal 1.96 beyond 30 degrees of freedom,
+/// NaN for none.
+///
+/// ```
+/// use a2perf_metrics::numeric::student_t975;
+/// assert_eq!(student_t975(2), 4.303);
+/// assert_eq!(student_t975(100), 1.96);
+/// assert!(student_t975(0).is_nan());
+/// ```
+pub fn student_t975(df: usize) -> f64 {
+    const T: [f64; 30] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
+        2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
+        2.052, 2.048, 2.045, 2.042,
+    ];
+    if df == 0 {
+        f64::NAN
+    } else {
+        T.get(df - 1).copied().unwrap_or(1.96)
+    }
+}
+
 /// `np.mean` of a 1-D array (NaN for an empty slice).
 ///
 /// ```
@@ -149,6 +228,35 @@ pub fn quantile_sorted(sorted: &[f64], q: f64) -> f64 {
 /// `np.percentile(x, p, method="linear")` of already **sorted** data, `p` in `[0, 100]`.
 pub fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
     quantile_sorted(sorted, p / 100.0)
+}
+
+/// Linear percentile `p` (0–100, clamped) of already **sorted** data with the one-sided
+/// interpolation `a + (b − a)·t` at every position.
+///
+/// [`percentile_sorted`] follows NumPy's `_lerp`, which switches to `b − (b − a)·(1 − t)` for
+/// `t ≥ 0.5`; the two pick the same neighbours and weights and differ at most in the last bit.
+/// `a2perf report` (bootstrap intervals, box plots) and the run summaries (median, p90, p99 of
+/// `inference.json`) have always used this form, so their files keep their bytes by using it.
+///
+/// ```
+/// use a2perf_metrics::numeric::percentile_sorted_lerp;
+/// let v = [1.0, 2.0, 3.0, 4.0, 10.0];
+/// assert!((percentile_sorted_lerp(&v, 90.0) - 7.6).abs() < 1e-12);
+/// assert_eq!(percentile_sorted_lerp(&v, 50.0), 3.0);
+/// assert_eq!(percentile_sorted_lerp(&[7.0], 25.0), 7.0);
+/// assert!(percentile_sorted_lerp(&[], 50.0).is_nan());
+/// ```
+pub fn percentile_sorted_lerp(sorted: &[f64], p: f64) -> f64 {
+    match sorted.len() {
+        0 => f64::NAN,
+        1 => sorted[0],
+        n => {
+            let pos = (p / 100.0).clamp(0.0, 1.0) * (n - 1) as f64;
+            let lo = pos.floor() as usize;
+            let hi = pos.ceil() as usize;
+            sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
+        }
+    }
 }
 
 /// `np.percentile(x, p, method="linear")`.

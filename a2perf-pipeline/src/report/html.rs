@@ -21,10 +21,11 @@ use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 
+use a2perf_metrics::numeric;
 use serde::Serialize;
 
+use super::format::{format_ratio, format_value};
 use super::paper::{FindingCheck, PaperCell, Verdict};
-use super::render::{format_ratio, format_value};
 use super::svg::{PALETTE, frame, nice_ticks, plot_ranges, tick_label};
 use super::{Category, Group, GroupReport, MetricValue, Report};
 use crate::stats::Summary;
@@ -874,20 +875,6 @@ fn notes(s: &mut String, groups: &[(usize, &GroupReport)]) {
     }
 }
 
-/// Two-sided 97.5% Student-t quantile for `df` degrees of freedom (normal beyond 30).
-fn t975(df: usize) -> f64 {
-    const T: [f64; 30] = [
-        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
-        2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
-        2.052, 2.048, 2.045, 2.042,
-    ];
-    if df == 0 {
-        f64::NAN
-    } else {
-        T.get(df - 1).copied().unwrap_or(1.96)
-    }
-}
-
 /// Per evaluation step over the seeds: (step, mean, lower, upper) of a 95% t-interval of the
 /// mean (the band collapses to the mean with one seed).
 fn mean_band(curves: &[&[(f64, f64)]]) -> Vec<(f64, f64, f64, f64)> {
@@ -903,10 +890,10 @@ fn mean_band(curves: &[&[(f64, f64)]]) -> Vec<(f64, f64, f64, f64)> {
         .into_iter()
         .map(|(bits, v)| {
             let n = v.len() as f64;
-            let mean = v.iter().sum::<f64>() / n;
+            let mean = numeric::mean_sequential(&v);
             let half = if v.len() > 1 {
-                let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
-                t975(v.len() - 1) * (var / n).sqrt()
+                let var = numeric::var_sequential(&v, 1);
+                numeric::student_t975(v.len() - 1) * (var / n).sqrt()
             } else {
                 0.0
             };

@@ -35,7 +35,7 @@ use std::path::{Path, PathBuf};
 use a2perf_core::Value;
 use serde::{Deserialize, Serialize};
 
-use super::render::format_value;
+use super::format::format_value;
 use super::{Group, Report};
 use crate::{PipelineError, Result};
 

@@ -3,45 +3,9 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
+pub use super::format::{format_ratio, format_value};
 use super::paper::{FindingCheck, PaperCell, PaperComparison, RATIO_METRICS, Verdict};
 use super::{Category, Group, GroupReport, MetricValue, Report, TableSettings};
-
-/// The original's number format: two decimals, or scientific notation below 0.01.
-///
-/// ```
-/// use a2perf_pipeline::report::render::format_value;
-/// assert_eq!(format_value(12.345), "12.35");
-/// assert_eq!(format_value(0.00123), "1.23e-3");
-/// assert_eq!(format_value(0.0), "0.00");
-/// assert_eq!(format_value(-0.0), "0.00");
-/// ```
-pub fn format_value(v: f64) -> String {
-    if v != 0.0 && v.abs() < 1e-2 {
-        format!("{v:.2e}")
-    } else {
-        // `-0.00` would suggest a sign the value does not have.
-        format!("{:.2}", if v == 0.0 { 0.0 } else { v })
-    }
-}
-
-/// A ratio to three significant digits (scientific notation far from 1).
-///
-/// ```
-/// use a2perf_pipeline::report::render::format_ratio;
-/// assert_eq!(format_ratio(0.026579), "0.0266");
-/// assert_eq!(format_ratio(1.0), "1.00");
-/// assert_eq!(format_ratio(123.456), "123");
-/// assert_eq!(format_ratio(6.38e-4), "6.38e-4");
-/// ```
-pub fn format_ratio(r: f64) -> String {
-    let a = r.abs();
-    if r == 0.0 || !(1e-3..1e3).contains(&a) {
-        format!("{r:.2e}")
-    } else {
-        let decimals = (2 - a.log10().floor() as i32).max(0) as usize;
-        format!("{r:.decimals$}")
-    }
-}
 
 /// Text from the results (names, notes, reasons) made inert in Markdown: HTML's `&`, `<` and
 /// `>` become entities, so a name holding markup is shown, never run, and `|` is escaped so that
@@ -410,97 +374,106 @@ pub fn markdown(report: &Report) -> String {
         report.bootstrap_reps
     );
     for task in tasks(report) {
-        let groups: Vec<&GroupReport> = report.groups.iter().filter(|g| g.task == task).collect();
-        let first = groups[0];
-        let paper = report.paper_of(task);
-        let _ = writeln!(
-            s,
-            "## {} ({}, {})\n",
-            md_text(task),
-            md_code(&first.env_id),
-            md_text(&first.domain)
-        );
-        if let Some(t) = report.settings_of(task) {
-            for line in settings_lines(t) {
-                let _ = writeln!(s, "{}\n", md_text(&line));
-            }
-        }
-        if let Some(p) = paper {
-            let _ = writeln!(
-                s,
-                "Paper columns: {}, in our units (conversions in the notes).\n",
-                md_text(&paper_heading(p))
-            );
-        }
-        let _ = write!(s, "| Category | Metric | ");
-        for g in &groups {
-            let algorithm = md_text(&g.algorithm.to_uppercase());
-            let _ = write!(s, "{algorithm} (seeds {}) | ", g.seeds.len());
-            if paper.is_some() {
-                let _ = write!(s, "{algorithm} (paper) | ");
-            }
-        }
-        let _ = writeln!(s);
-        let columns = groups.len() * if paper.is_some() { 2 } else { 1 };
-        let _ = writeln!(s, "|---|---|{}", "---|".repeat(columns));
-        for (cat, key, label, unit, higher) in rows(&groups) {
-            let arrow = if higher { "↑" } else { "↓" };
-            let _ = write!(
-                s,
-                "| {} | {} ({}) {arrow} | ",
-                cat.label(),
-                md_text(label),
-                md_text(unit)
-            );
-            for g in &groups {
-                let c = g.metric(key).map_or_else(|| "—".into(), |m| cell(m, false));
-                let _ = write!(s, "{c} | ");
-                if let Some(p) = paper {
-                    let pc = p
-                        .columns
-                        .iter()
-                        .find(|c| c.algorithm == g.algorithm)
-                        .and_then(|c| c.cell(key));
-                    let _ = write!(s, "{} | ", paper_cell(pc, false));
-                }
-            }
-            let _ = writeln!(s);
-        }
-        let _ = writeln!(s);
-        if let Some(p) = paper {
-            ratio_table_md(&mut s, &groups, p);
-        }
-        let mut notes = Vec::new();
-        for g in &groups {
-            for m in &g.metrics {
-                if let Some(n) = &m.note {
-                    notes.push(format!(
-                        "- {} / {}: {}",
-                        md_text(&g.algorithm),
-                        m.key,
-                        md_text(n)
-                    ));
-                }
-            }
-        }
-        if let Some(p) = paper {
-            notes.extend(
-                paper_notes(p)
-                    .into_iter()
-                    .map(|n| format!("- {}", md_text(&n))),
-            );
-        }
-        if !notes.is_empty() {
-            let _ = writeln!(
-                s,
-                "<details><summary>Notes</summary>\n\n{}\n\n</details>\n",
-                notes.join("\n")
-            );
-        }
+        task_md(&mut s, report, task);
     }
     if !report.findings.is_empty() {
         findings_md(&mut s, &report.findings);
     }
+    comparisons_md(&mut s, report);
+    if !report.skipped_runs.is_empty() {
+        let _ = writeln!(s, "## Runs left out\n");
+        for (dir, why) in &report.skipped_runs {
+            let _ = writeln!(s, "- {}: {}", md_code(dir), md_text(why));
+        }
+    }
+    s
+}
+
+/// The table of one task in Markdown: settings, our columns (and the paper's), the ratio
+/// table and the notes.
+fn task_md(s: &mut String, report: &Report, task: &str) {
+    let groups: Vec<&GroupReport> = report.groups.iter().filter(|g| g.task == task).collect();
+    let first = groups[0];
+    let paper = report.paper_of(task);
+    let _ = writeln!(
+        s,
+        "## {} ({}, {})\n",
+        md_text(task),
+        md_code(&first.env_id),
+        md_text(&first.domain)
+    );
+    if let Some(t) = report.settings_of(task) {
+        for line in settings_lines(t) {
+            let _ = writeln!(s, "{}\n", md_text(&line));
+        }
+    }
+    if let Some(p) = paper {
+        let _ = writeln!(
+            s,
+            "Paper columns: {}, in our units (conversions in the notes).\n",
+            md_text(&paper_heading(p))
+        );
+    }
+    let _ = write!(s, "| Category | Metric | ");
+    for g in &groups {
+        let algorithm = md_text(&g.algorithm.to_uppercase());
+        let _ = write!(s, "{algorithm} (seeds {}) | ", g.seeds.len());
+        if paper.is_some() {
+            let _ = write!(s, "{algorithm} (paper) | ");
+        }
+    }
+    let _ = writeln!(s);
+    let columns = groups.len() * if paper.is_some() { 2 } else { 1 };
+    let _ = writeln!(s, "|---|---|{}", "---|".repeat(columns));
+    for (cat, key, label, unit, higher) in rows(&groups) {
+        let arrow = if higher { "↑" } else { "↓" };
+        let _ = write!(
+            s,
+            "| {} | {} ({}) {arrow} | ",
+            cat.label(),
+            md_text(label),
+            md_text(unit)
+        );
+        for c in row_cells(&groups, paper, key, false) {
+            let _ = write!(s, "{c} | ");
+        }
+        let _ = writeln!(s);
+    }
+    let _ = writeln!(s);
+    if let Some(p) = paper {
+        ratio_table_md(s, &groups, p);
+    }
+    let mut notes = Vec::new();
+    for g in &groups {
+        for m in &g.metrics {
+            if let Some(n) = &m.note {
+                notes.push(format!(
+                    "- {} / {}: {}",
+                    md_text(&g.algorithm),
+                    m.key,
+                    md_text(n)
+                ));
+            }
+        }
+    }
+    if let Some(p) = paper {
+        notes.extend(
+            paper_notes(p)
+                .into_iter()
+                .map(|n| format!("- {}", md_text(&n))),
+        );
+    }
+    if !notes.is_empty() {
+        let _ = writeln!(
+            s,
+            "<details><summary>Notes</summary>\n\n{}\n\n</details>\n",
+            notes.join("\n")
+        );
+    }
+}
+
+/// The IQM and probability-of-improvement tables in Markdown.
+fn comparisons_md(s: &mut String, report: &Report) {
     if !report.iqm.is_empty() {
         let _ = writeln!(s, "## Interquartile mean of returns (95% bootstrap CI)\n");
         let _ = writeln!(
@@ -541,13 +514,33 @@ pub fn markdown(report: &Report) -> String {
         }
         let _ = writeln!(s);
     }
-    if !report.skipped_runs.is_empty() {
-        let _ = writeln!(s, "## Runs left out\n");
-        for (dir, why) in &report.skipped_runs {
-            let _ = writeln!(s, "- {}: {}", md_code(dir), md_text(why));
+}
+
+/// The cells of metric `key`'s row, one per group and, beside each, the paper's when the
+/// table has a paper column (missing: a dash).
+fn row_cells(
+    groups: &[&GroupReport],
+    paper: Option<&PaperComparison>,
+    key: &str,
+    latex: bool,
+) -> Vec<String> {
+    let dash = if latex { "--" } else { "—" };
+    let mut out = Vec::new();
+    for g in groups {
+        out.push(
+            g.metric(key)
+                .map_or_else(|| dash.into(), |m| cell(m, latex)),
+        );
+        if let Some(p) = paper {
+            let pc = p
+                .columns
+                .iter()
+                .find(|c| c.algorithm == g.algorithm)
+                .and_then(|c| c.cell(key));
+            out.push(paper_cell(pc, latex));
         }
     }
-    s
+    out
 }
 
 /// The ratio rows (energy, RAM, wall-clock time) of a table with a paper column.
@@ -670,17 +663,8 @@ pub fn latex(report: &Report) -> String {
                 tex_escape(label),
                 tex_escape(unit)
             );
-            for g in &groups {
-                let c = g.metric(key).map_or_else(|| "--".into(), |m| cell(m, true));
+            for c in row_cells(&groups, paper, key, true) {
                 let _ = write!(s, " & {c}");
-                if let Some(p) = paper {
-                    let pc = p
-                        .columns
-                        .iter()
-                        .find(|c| c.algorithm == g.algorithm)
-                        .and_then(|c| c.cell(key));
-                    let _ = write!(s, " & {}", paper_cell(pc, true));
-                }
             }
             let _ = writeln!(s, " \\\\");
         }

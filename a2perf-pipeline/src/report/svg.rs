@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write;
 
 use super::{Group, GroupReport};
-use crate::stats::percentile_sorted;
+use a2perf_metrics::numeric::percentile_sorted_lerp;
 
 pub(super) const PALETTE: [&str; 8] = [
     "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
@@ -278,9 +278,9 @@ pub fn curves(task: &str, groups: &[&Group]) -> String {
                 v.sort_by(f64::total_cmp);
                 (
                     step as f64,
-                    percentile_sorted(&v, 25.0),
-                    percentile_sorted(&v, 50.0),
-                    percentile_sorted(&v, 75.0),
+                    percentile_sorted_lerp(&v, 25.0),
+                    percentile_sorted_lerp(&v, 50.0),
+                    percentile_sorted_lerp(&v, 75.0),
                 )
             })
             .collect();

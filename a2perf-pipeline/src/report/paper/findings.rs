@@ -13,7 +13,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::super::render::{format_ratio, format_value};
+use super::super::format::{format_ratio, format_value};
 
 /// One finding of the paper: the claim, and when it holds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -5,7 +5,8 @@ use std::collections::BTreeSet;
 
 use serde::{Deserialize, Serialize};
 
-use super::super::{ENERGY_NAMES, Group, PEAK_RAM_NAMES, Report, meter_value};
+use super::super::families::system::{ENERGY_NAMES, PEAK_RAM_NAMES, meter_value};
+use super::super::{Group, Report};
 use super::findings::{CellRef, CellSource};
 use super::{OursSide, PaperSide, PaperTables, Phase, Verdict, finding_unit, ratio_of, verdict_of};
 
