@@ -66,6 +66,7 @@ use serde::{Deserialize, Serialize};
 
 pub mod arrow;
 pub mod bench;
+pub mod bundle;
 pub mod collect;
 pub mod external;
 pub mod generalize;
