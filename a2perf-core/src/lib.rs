@@ -47,6 +47,7 @@ pub mod meter;
 pub mod policy;
 pub mod registry;
 pub mod render;
+pub mod replay;
 pub mod results;
 pub mod resume;
 pub mod rng;

@@ -59,6 +59,7 @@ pub use a2perf_core::CancelToken;
 
 pub mod arrow;
 pub mod bench;
+pub mod bundle;
 pub mod collect;
 pub mod dataset;
 mod error;
