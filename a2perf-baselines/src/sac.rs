@@ -488,6 +488,7 @@ impl SacRun {
         }
         for (i, slot) in self.actions.iter_mut().enumerate() {
             if let Action::Continuous(v) = slot {
+                #[allow(clippy::needless_range_loop)] // k indexes several parallel buffers
                 for k in 0..d {
                     v[k] = squash_to_bounds(
                         self.a_norm[i * d + k],
@@ -610,6 +611,7 @@ impl SacRun {
         ensure(&mut self.dq, b);
         for c in self.critics.iter_mut() {
             let q = self.qnet.forward(&c.params, &self.qin, b, &mut c.ws);
+            #[allow(clippy::needless_range_loop)] // k indexes several parallel buffers
             for k in 0..b {
                 self.dq[k] = 2.0 * (q[k] - self.y[k]) / b as f32;
             }
