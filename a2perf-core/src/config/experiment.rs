@@ -7,10 +7,11 @@ use std::path::{Path, PathBuf};
 
 use super::error::{ConfigError, Location};
 use super::profile::{Profile, parse_profile, parse_tasks, tasks_to_value};
+use super::schema::{as_struct, check_kind, unknown_key};
 use super::syntax::{Field, Node, NodeValue};
 use crate::registry::{Registry, TaskRef};
 use crate::training::TrainingSettings;
-use crate::value::{ParamKind, ParamSpec, Params, Value, did_you_mean};
+use crate::value::{ParamKind, ParamSpec, Params, Value};
 
 /// The file name pipelines write the operative config to, next to their results.
 pub const OPERATIVE_CONFIG_FILE: &str = "operative_config.ron";
@@ -270,73 +271,6 @@ pub fn section_schema(section: &str) -> Option<Vec<ParamSpec>> {
 struct Checked {
     value: Value,
     location: Location,
-}
-
-fn known_list<'a>(names: impl Iterator<Item = &'a str>) -> String {
-    names
-        .map(|n| format!("`{n}`"))
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-pub(super) fn unknown_key<'a>(
-    field: &Field,
-    prefix: &str,
-    known: impl Iterator<Item = &'a str> + Clone,
-) -> ConfigError {
-    let hint = did_you_mean(&field.key, known.clone());
-    ConfigError::UnknownKey {
-        location: field.key_location.clone(),
-        key: format!("{prefix}{}", field.key),
-        known: hint.is_none().then(|| known_list(known)),
-        hint,
-    }
-}
-
-pub(super) fn as_struct<'a>(node: &'a Node, key: &str) -> Result<&'a [Field], ConfigError> {
-    match &node.value {
-        NodeValue::Struct(fields) => Ok(fields),
-        _ => Err(ConfigError::WrongType {
-            location: node.location.clone(),
-            key: key.to_string(),
-            reason: format!(
-                "expected a struct `(key: value, ...)`, found {}",
-                node.type_name()
-            ),
-        }),
-    }
-}
-
-pub(super) fn check_kind(
-    spec: &ParamSpec,
-    node: &Node,
-    key: &str,
-    nullable: bool,
-) -> Result<Value, ConfigError> {
-    let value = node.to_value();
-    let wrong = |reason: String| ConfigError::WrongType {
-        location: node.location.clone(),
-        key: key.to_string(),
-        reason,
-    };
-    if value == Value::Null && !nullable {
-        return Err(wrong(format!(
-            "expected {}, found none",
-            spec.kind.describe()
-        )));
-    }
-    spec.kind.check(&value).map_err(|reason| {
-        let quote_hint = matches!(node.location, Location::Override(_))
-            && matches!(spec.kind, ParamKind::Str | ParamKind::Path)
-            && !matches!(value, Value::Str(_) | Value::Null);
-        if quote_hint {
-            wrong(format!(
-                "{reason} (quote it to pass a string: `{key}='\"{value}\"'`)"
-            ))
-        } else {
-            wrong(reason)
-        }
-    })
 }
 
 /// Keys of a fixed section whose values are structured (lists of structs) and checked on their

@@ -57,6 +57,7 @@ mod expand;
 mod experiment;
 mod layers;
 mod profile;
+mod schema;
 mod syntax;
 
 #[cfg(test)]

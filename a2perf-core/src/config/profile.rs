@@ -9,7 +9,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::error::ConfigError;
-use super::experiment::{as_struct, check_kind, unknown_key};
+use super::schema::{as_struct, check_kind, unknown_key};
 use super::syntax::{Field, Node, NodeValue};
 use crate::registry::{EnvEntry, Registry, TaskRef};
 use crate::value::{ParamSpec, Value, did_you_mean};
