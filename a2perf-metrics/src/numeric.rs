@@ -123,7 +123,7 @@ pub fn var_sequential(x: &[f64], ddof: usize) -> f64 {
     x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (x.len() - ddof) as f64
 }
 
-/// [`std`] summed by [`sequential_sum`]: the square root of [`var_sequential`].
+/// [`std()`] summed by [`sequential_sum`]: the square root of [`var_sequential`].
 ///
 /// ```
 /// let s = a2perf_metrics::numeric::std_sequential(&[1.0, 3.0], 1);

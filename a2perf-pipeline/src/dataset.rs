@@ -76,7 +76,7 @@ pub fn level_of(ret: f64, mu: f64, sigma: f64, one_sigma: bool) -> Option<Level>
     }
 }
 
-/// Options of [`collect`].
+/// Options of [`collect`](crate::collect::collect).
 #[derive(Clone, Debug)]
 pub struct CollectOptions {
     /// Greedy episodes per checkpoint evaluation (the original: 100).

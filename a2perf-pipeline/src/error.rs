@@ -55,7 +55,7 @@ pub enum PipelineError {
     /// Cancelled (Ctrl-C); the state on disk is resumable.
     #[error("cancelled; rerun the same command to resume")]
     Cancelled,
-    /// Run directories that another trainer holds (see [`run_lock`]): left alone, neither
+    /// Run directories that another trainer holds (see [`run_lock`](crate::run_lock)): left alone, neither
     /// trained nor treated as complete.
     #[error("{}", .0.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))]
     Locked(Vec<LockedRun>),

@@ -3,7 +3,7 @@
 //! The benchmark pipelines as a library: plan, train, infer, generalize, collect and report,
 //! plus the registry of every built-in environment and algorithm. The `a2perf` command
 //! (`a2perf-cli`) and the Python package (`python/`) are two front ends over it; a participant's
-//! own binary or test can call it with its own [`Registry`]:
+//! own binary or test can call it with its own [`Registry`](a2perf_core::Registry):
 //!
 //! - [`train()`]: one run per (task, algorithm, seed), resumable, shardable;
 //! - [`infer_run`]: rollouts and per-call inference time of a trained policy;

@@ -24,7 +24,7 @@ pub enum RunOutcome {
     Locked(Option<LockHolder>),
 }
 
-/// Outcome of [`train`].
+/// Outcome of [`train`](crate::train::train).
 #[derive(Clone, Debug, Default)]
 pub struct TrainSummary {
     /// Run directories with their outcome, in grid order.
@@ -73,7 +73,7 @@ impl TrainSummary {
     }
 }
 
-/// What [`train_run`] did to one run (a child process of [`Isolation::Children`] hands it to
+/// What [`train_run`](crate::train::train_run) did to one run (a child process of [`Isolation::Children`](crate::isolate::Isolation::Children) hands it to
 /// its parent as JSON).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunReport {

@@ -149,7 +149,7 @@ pub struct RunRecord {
     #[serde(default)]
     pub dataset: Option<DatasetProvenance>,
     /// For runs trained outside the benchmark's algorithms (a Python agent through
-    /// `a2perf_rs.TrainingRun`, see [`external`]): who trained it. Absent for built-in runs.
+    /// `a2perf_rs.TrainingRun`, see [`external`](crate::external)): who trained it. Absent for built-in runs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub external: Option<ExternalAgent>,
 }
@@ -277,8 +277,8 @@ impl LoadedRun {
 
 /// Where a pipeline gets the policies it rolls out: the registry's checkpoint loaders for the
 /// benchmark's own algorithms ([`RegistryPolicies`]), or a front end's policies for an external
-/// agent (the Python package's callables). [`infer::infer_run_with`],
-/// [`generalize::generalize_run_with`] and [`collect::collect_with`] take one.
+/// agent (the Python package's callables). [`infer::infer_run_with`](crate::infer::infer_run_with),
+/// [`generalize::generalize_run_with`](crate::generalize::generalize_run_with) and [`collect::collect_with`](crate::collect::collect_with) take one.
 pub trait PolicySource {
     /// The policy of `run` saved in `checkpoint` (its `policy.ckpt` or one of
     /// `checkpoints/step_*.ckpt`), for an environment with `spec`.

@@ -18,7 +18,7 @@ pub const CHROMIUM_FLAGS: [&str; 8] = [
 
 /// Extra flags that cut memory without changing what pages compute (the parity, crash-restart
 /// and shutdown tests run with them). Measured one by one on a lone environment (PSS of
-/// chromedriver + browser, see [`TreeMemory`]; the table is in the crate README):
+/// chromedriver + browser, see [`TreeMemory`](super::TreeMemory); the table is in the crate README):
 ///
 /// - `--single-process`, `--no-zygote`: browser, renderer, GPU and network service in one
 ///   process. Chromium's normal model (5–10 processes) costs 35–80 MiB more; it is a debugging
