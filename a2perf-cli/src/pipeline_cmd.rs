@@ -576,7 +576,7 @@ fn page_from_reports(dirs: &[PathBuf], out: &Path) -> Result<()> {
         );
     }
     // Everything is read and merged before anything is written.
-    let (report, page) = pipeline::report::html::page_from_report_dirs(dirs)?;
+    let (report, page) = pipeline::report::page_from_report_dirs(dirs)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     a2perf_core::results::write_json_atomic(&out.join("report.json"), &report)?;
     let index = out.join("index.html");

@@ -333,7 +333,7 @@ impl ExternalRun {
                 run.begin()?;
             }
         }
-        write_run_files(&run, &planned.record_json, &job.plan)?;
+        write_run_files(&run, &planned.record_json, job.plan.operative.as_ref())?;
         run.set_status(
             RunState::Running,
             "training by an external agent (a2perf_rs.TrainingRun)",

@@ -8,11 +8,11 @@ use a2perf_core::{ActMode, Registry, RngStream, write_json_atomic};
 
 // The result file's model belongs to the run directory; `generalize::` still names it.
 use crate::error::{PipelineError, Result};
-use crate::plan::{GeneralizationTask, SuiteSource};
 use crate::progress;
 use crate::rollout::located_rollout;
 use crate::run_dir::{GENERALIZATION_FILE, LoadedRun, POLICY_FILE, PolicySource, RegistryPolicies};
 pub use crate::run_dir::{GeneralizationResults, TaskResult};
+use crate::spec::{GeneralizationTask, SuiteSource};
 
 /// Rolls the final policy of a complete run out on every task of its generalization suite and
 /// writes `generalization.json`. The suite is the one `run.json` records; a run recorded without

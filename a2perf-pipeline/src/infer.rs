@@ -11,13 +11,13 @@ use a2perf_core::{
 // The result file's model belongs to the run directory; `infer::` still names it.
 use crate::error::{PipelineError, Result, io_err};
 use crate::phase::{MeterFactory, Phase, measured, no_meters};
-use crate::plan::ObservationSource;
 use crate::progress;
 pub use crate::run_dir::InferenceResults;
 use crate::run_dir::{
     INFERENCE_EMISSIONS_FILE, INFERENCE_FILE, LoadedRun, POLICY_FILE, PolicySource,
     RegistryPolicies,
 };
+use crate::spec::ObservationSource;
 use crate::stats::Summary;
 
 /// Options of [`infer_run`]; `None` fields take the run's recorded settings.

@@ -79,6 +79,7 @@ mod rollout;
 pub mod run;
 pub mod run_dir;
 pub mod run_lock;
+pub mod spec;
 pub mod stats;
 pub mod sysinfo;
 pub mod train;

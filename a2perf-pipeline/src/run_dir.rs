@@ -14,12 +14,33 @@ use serde::{Deserialize, Serialize};
 use crate::dataset::DatasetProvenance;
 use crate::error::{PipelineError, Result, io_err};
 use crate::phase::{MetricSettings, PhaseSystem, combine_segments};
-use crate::plan::{
-    AlgorithmSpec, ExperimentPlan, GeneralizationSettings, InferenceSettings, ObservationSource,
-    RunJob, SuiteSource, TaskSpec,
+use crate::spec::{
+    AlgorithmSpec, GeneralizationSettings, InferenceSettings, ObservationSource, OperativeWriter,
+    SuiteSource, TaskSpec,
 };
 use crate::stats::Summary;
 use crate::sysinfo::SystemInfo;
+
+// Run directories are named from their task, algorithm and seed, in characters safe in a path
+// on every platform.
+
+/// `s` with characters that are awkward in paths replaced by `_`.
+pub fn path_safe(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// `<task>__<algorithm>__seed<k>`, made [`path_safe`].
+pub fn run_dir_name(task: &str, algorithm: &str, seed: u64) -> String {
+    format!("{}__{}__seed{seed}", path_safe(task), path_safe(algorithm))
+}
 
 /// `run.json`.
 pub const RUN_FILE: &str = "run.json";
@@ -566,67 +587,15 @@ pub(crate) struct PlannedRun {
     pub(crate) env_params: a2perf_core::Params,
 }
 
-impl PlannedRun {
-    /// The record of `job` trained by `algorithm` (hyperparameters resolved): the task's
-    /// parameters resolved and the environment's provenance read from a probe instance.
-    /// `external` marks a run trained outside the benchmark's algorithms.
-    pub(crate) fn new(
-        registry: &Registry,
-        job: &RunJob,
-        algorithm: AlgorithmSpec,
-        external: Option<ExternalAgent>,
-    ) -> Result<Self> {
-        let plan = &job.plan;
-        let env = registry.env(&plan.task.env_id)?.clone();
-        let env_params = registry.env_params(&plan.task.env_id, &plan.task.env_params)?;
-        let probe = (env.make)(&env_params).map_err(|source| a2perf_core::RegistryError::Env {
-            id: plan.task.env_id.clone(),
-            source,
-        })?;
-        let env_metadata = probe.spec().metadata.clone();
-        drop(probe);
-        let mut task = plan.task.clone();
-        task.env_params = env_params.values().clone();
-        let record = RunRecord {
-            format_version: RUN_FORMAT_VERSION,
-            experiment: plan.name.clone(),
-            task,
-            domain: env.domain.clone(),
-            algorithm,
-            seed: job.seed,
-            training: plan.training.clone(),
-            inference: plan.inference.clone(),
-            generalization: plan.generalization.clone(),
-            metrics: plan.metrics.clone(),
-            env_metadata,
-            dataset: plan.dataset.clone(),
-            external,
-        };
-        // The exact bytes `write_json_atomic` writes, so that comparing them with the file on
-        // disk is exact (no float parsing).
-        let record_json =
-            serde_json::to_vec_pretty(&record).map_err(|e| PipelineError::Corrupt {
-                path: plan.run_dir(job.seed).join(RUN_FILE),
-                reason: e.to_string(),
-            })?;
-        Ok(Self {
-            record,
-            record_json,
-            env,
-            env_params,
-        })
-    }
-}
-
 /// `run.json`, `system_info.json` and the operative config of a run that starts training.
 pub(crate) fn write_run_files(
     run: &RunDir,
     record_json: &[u8],
-    plan: &ExperimentPlan,
+    operative: Option<&OperativeWriter>,
 ) -> Result<()> {
     write_atomic(&run.file(RUN_FILE), record_json).map_err(io_err(&run.file(RUN_FILE)))?;
     write_json_atomic(&run.file(SYSTEM_INFO_FILE), &SystemInfo::current())?;
-    if let Some(write) = &plan.operative {
+    if let Some(write) = operative {
         write(run.path()).map_err(|reason| PipelineError::Corrupt {
             path: run.file(OPERATIVE_FILE),
             reason,

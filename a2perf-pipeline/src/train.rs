@@ -18,13 +18,14 @@ use a2perf_core::{
 use crate::error::{PipelineError, Result, io_err};
 use crate::isolate::Isolation;
 use crate::phase::measured;
-use crate::plan::{AlgorithmSpec, RunJob};
+use crate::plan::RunJob;
 use crate::progress;
 use crate::run_dir::{
     CHECKPOINT_DIR, POLICY_FILE, PlannedRun, RESUME_DIR, Start, TRAIN_SEGMENTS_FILE, prepare,
     remove_checkpoints_after, wipe, write_curve, write_run_files, write_train_system,
 };
 use crate::run_lock::TrainingLock;
+use crate::spec::AlgorithmSpec;
 
 // Where these lived before the run directory and the phase measurements got modules of their
 // own; front ends and the report still name them here.
@@ -207,7 +208,7 @@ pub fn train_run(registry: &Registry, job: &RunJob, opts: &TrainOptions) -> Resu
             Start::Fresh => (None, TrainSegments::default()),
             Start::Resume(point, segments) => (Some(*point), segments),
         };
-        write_run_files(&run, &record_json, plan)?;
+        write_run_files(&run, &record_json, plan.operative.as_ref())?;
         let point = match point {
             Some(p) => Some(continue_from(&run, p, &segments)?),
             None => None,

@@ -357,7 +357,7 @@ fn a_report_merged_alone_is_the_same_report() {
 fn report_directories_merge_into_one_page_whose_numbers_are_the_merged_report_json() {
     let dirs = committed_report_dirs();
     assert!(dirs.len() >= 2, "{dirs:?}");
-    let (merged, page) = html::page_from_report_dirs(&dirs).unwrap();
+    let (merged, page) = a2perf_pipeline::report::page_from_report_dirs(&dirs).unwrap();
     let parts: Vec<Report> = dirs
         .iter()
         .map(|d| a2perf_core::results::read_json(&d.join("report.json")).unwrap())
@@ -415,7 +415,7 @@ fn report_directories_merge_into_one_page_whose_numbers_are_the_merged_report_js
 
     // A group in two reports, and reports with different bootstrap repetitions, are refused
     // with the file named.
-    let err = html::page_from_report_dirs(&[dirs[0].clone(), dirs[0].clone()])
+    let err = a2perf_pipeline::report::page_from_report_dirs(&[dirs[0].clone(), dirs[0].clone()])
         .unwrap_err()
         .to_string();
     assert!(
@@ -431,9 +431,12 @@ fn report_directories_merge_into_one_page_whose_numbers_are_the_merged_report_js
     )
     .unwrap();
     std::fs::copy(dirs[1].join("curves.csv"), tmp.path().join("curves.csv")).unwrap();
-    let err = html::page_from_report_dirs(&[dirs[0].clone(), tmp.path().to_path_buf()])
-        .unwrap_err()
-        .to_string();
+    let err = a2perf_pipeline::report::page_from_report_dirs(&[
+        dirs[0].clone(),
+        tmp.path().to_path_buf(),
+    ])
+    .unwrap_err()
+    .to_string();
     assert!(
         err.contains(&tmp.path().join("report.json").display().to_string())
             && err.contains("bootstrap repetitions"),

@@ -12,7 +12,7 @@
 
 use std::path::{Path, PathBuf};
 
-use a2perf_pipeline::report::{Report, html, render};
+use a2perf_pipeline::report::{Report, render};
 
 fn docs() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs")
@@ -58,7 +58,7 @@ fn docs_results_merge_regenerates_the_committed_report_and_page() {
         .collect();
     dirs.sort();
     assert_eq!(dirs.len(), 9, "{dirs:?}");
-    let (merged, page) = html::page_from_report_dirs(&dirs).unwrap();
+    let (merged, page) = a2perf_pipeline::report::page_from_report_dirs(&dirs).unwrap();
     assert!(!merged.iqm.is_empty() && !merged.probability_of_improvement.is_empty());
     let json = serde_json::to_vec_pretty(&merged).unwrap();
     assert_same(

@@ -25,9 +25,9 @@ use a2perf_metrics::numeric;
 use serde::Serialize;
 
 use super::format::{format_ratio, format_value};
-use super::paper::{FindingCheck, PaperCell, Verdict};
+use super::load::Group;
+use super::model::{Category, FindingCheck, GroupReport, MetricValue, PaperCell, Report, Verdict};
 use super::svg::{PALETTE, frame, nice_ticks, plot_ranges, tick_label};
-use super::{Category, Group, GroupReport, MetricValue, Report};
 use crate::stats::Summary;
 use crate::{
     CURVE_CSV, GENERALIZATION_FILE, INFERENCE_FILE, OPERATIVE_FILE, RUN_FILE, TRAIN_SYSTEM_FILE,
@@ -213,26 +213,8 @@ pub fn page_from_report_dir(dir: &Path) -> Result<String> {
     Ok(page(&report, &runs))
 }
 
-/// One page for several report directories (each `report.json` and `curves.csv`, e.g. the
-/// per-domain reports under `docs/results/`), merged by [`super::merge_reports`]: returns the
-/// merged report, whose `report.json` the page's numbers refer to, and the page. As in
-/// [`page_from_report_dir`], run links and inference-time distributions are left out.
-pub fn page_from_report_dirs(dirs: &[PathBuf]) -> Result<(Report, String)> {
-    let mut parts = Vec::with_capacity(dirs.len());
-    let mut runs = Vec::new();
-    for dir in dirs {
-        let path = dir.join("report.json");
-        let report: Report = a2perf_core::results::read_json(&path)?;
-        runs.extend(runs_of_report_dir(dir, &report)?);
-        parts.push((path, report));
-    }
-    let merged = super::merge_reports(parts)?;
-    let page = page(&merged, &runs);
-    Ok((merged, page))
-}
-
 /// The runs of a report directory's `report.json`, with their curves from its `curves.csv`.
-fn runs_of_report_dir(dir: &Path, report: &Report) -> Result<Vec<RunView>> {
+pub(super) fn runs_of_report_dir(dir: &Path, report: &Report) -> Result<Vec<RunView>> {
     let curves_path = dir.join("curves.csv");
     let text = std::fs::read_to_string(&curves_path).map_err(crate::io_err(&curves_path))?;
     runs_from_curves_csv(report, &text).map_err(|reason| PipelineError::Corrupt {
@@ -819,7 +801,7 @@ fn ratio_table(
     for m in first
         .metrics
         .iter()
-        .filter(|m| super::paper::RATIO_METRICS.contains(&m.key.as_str()))
+        .filter(|m| super::model::RATIO_METRICS.contains(&m.key.as_str()))
     {
         let _ = write!(
             s,

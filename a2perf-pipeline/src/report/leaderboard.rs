@@ -6,7 +6,8 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use super::{Group, Report};
+use super::load::Group;
+use super::model::Report;
 use crate::{RunRecord, SystemInfo};
 
 /// One (task, algorithm) entry.

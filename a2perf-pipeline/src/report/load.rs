@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 use a2perf_core::{LearningCurve, results::read_json};
 use serde::Deserialize;
 
-use super::{ProfileUse, SuiteUse, TableSettings};
+use super::model::{ProfileUse, SuiteUse, TableSettings};
 use crate::generalize::GeneralizationResults;
 use crate::infer::InferenceResults;
-use crate::plan::GeneralizationSuite;
+use crate::spec::GeneralizationSuite;
 use crate::train::PhaseSystem;
 use crate::{
     CURVE_JSON, GENERALIZATION_FILE, INFERENCE_FILE, LoadedRun, PipelineError, Result,

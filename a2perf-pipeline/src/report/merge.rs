@@ -4,8 +4,8 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+use super::model::{Report, ReportOptions, TableSettings};
 use super::statistics::comparisons;
-use super::{Report, ReportOptions, TableSettings};
 use crate::{PipelineError, Result};
 
 /// Merges reports of disjoint (task, algorithm) groups into one, as if `a2perf report` had read

@@ -3,9 +3,13 @@
 use std::collections::BTreeSet;
 use std::fmt::Write;
 
+use a2perf_core::LearningCurve;
+
 pub use super::format::{format_ratio, format_value};
-use super::paper::{FindingCheck, PaperCell, PaperComparison, RATIO_METRICS, Verdict};
-use super::{Category, Group, GroupReport, MetricValue, Report, TableSettings};
+use super::model::{
+    Category, FindingCheck, GroupReport, MetricValue, PaperCell, PaperComparison, RATIO_METRICS,
+    Report, TableSettings, Verdict,
+};
 
 /// Text from the results (names, notes, reasons) made inert in Markdown: HTML's `&`, `<` and
 /// `>` become entities, so a name holding markup is shown, never run, and `|` is escaped so that
@@ -203,7 +207,7 @@ fn findings_latex(s: &mut String, findings: &[FindingCheck]) {
 }
 
 /// One line naming a profile and every switch it gives the task's environment.
-fn describe_profile(p: Option<&super::ProfileRecord>) -> String {
+fn describe_profile(p: Option<&crate::spec::ProfileRecord>) -> String {
     match p {
         None => "none (corrected defaults)".into(),
         Some(p) if p.switches.is_empty() => {
@@ -222,7 +226,7 @@ fn describe_profile(p: Option<&super::ProfileRecord>) -> String {
 }
 
 /// `from <source>: <tasks>`.
-fn describe_suite(u: &super::SuiteUse) -> String {
+fn describe_suite(u: &super::model::SuiteUse) -> String {
     match u.source {
         None => "the domain's registry default (not recorded by these runs)".into(),
         Some(source) => format!("from {}: {}", source.label(), u.tasks.join(", ")),
@@ -710,7 +714,7 @@ pub fn latex(report: &Report) -> String {
         let _ = writeln!(
             s,
             "\\caption{{{caption}}}\n\\label{{tab:metrics-{}}}\n\\end{{table}}\n",
-            super::super::plan::path_safe(task)
+            crate::run_dir::path_safe(task)
         );
     }
     if !report.findings.is_empty() {
@@ -808,18 +812,15 @@ pub fn csv(report: &Report) -> String {
 }
 
 /// Every training curve as `run,step,value` (the input of `a2perf metrics reliability`), with
-/// the run named `<task>/<algorithm>/seed<k>`.
-pub fn curves_csv(groups: &[Group]) -> String {
+/// the run named `<task>/<algorithm>/seed<k>`. `runs` are `(task, algorithm, seed, curve)`.
+pub fn curves_csv<'a>(
+    runs: impl IntoIterator<Item = (&'a str, &'a str, u64, &'a LearningCurve)>,
+) -> String {
     let mut s = String::from("run,step,value\n");
-    for g in groups {
-        for r in &g.runs {
-            let name = csv_field(&format!(
-                "{}/{}/seed{}",
-                g.task, g.algorithm, r.run.record.seed
-            ));
-            for p in &r.curve.points {
-                let _ = writeln!(s, "{name},{},{}", p.env_steps, p.mean_return);
-            }
+    for (task, algorithm, seed, curve) in runs {
+        let name = csv_field(&format!("{task}/{algorithm}/seed{seed}"));
+        for p in &curve.points {
+            let _ = writeln!(s, "{name},{},{}", p.env_steps, p.mean_return);
         }
     }
     s

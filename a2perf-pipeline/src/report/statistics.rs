@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use a2perf_core::RngStream;
 use a2perf_metrics::{bootstrap, numeric, rliable};
 
-use super::{GroupReport, ImprovementEntry, IqmEntry, ReportOptions};
+use super::model::{GroupReport, ImprovementEntry, IqmEntry, MetricValue, ReportOptions};
 
 /// Mean, sample standard deviation and 95% bootstrap interval of the mean of one metric over
 /// a group's seeds.
@@ -153,4 +153,40 @@ fn improvement_interval(
         }
         acc / pairs.len() as f64
     })
+}
+
+/// The bootstrap settings and stream of a column's per-seed metrics.
+pub(super) struct Seeds {
+    pub(super) reps: usize,
+    pub(super) rng: RngStream,
+}
+
+impl Seeds {
+    /// A metric with one value per run: its statistics over the seeds, or missing (saying how
+    /// many runs have it) when any run lacks it. `notes` (deduplicated) say how it was obtained.
+    pub(super) fn metric(
+        &mut self,
+        metric: MetricValue,
+        values: Vec<Option<f64>>,
+        missing_why: &str,
+        mut notes: Vec<String>,
+    ) -> MetricValue {
+        let mut m = metric;
+        if values.is_empty() || values.iter().any(Option::is_none) {
+            let have = values.iter().filter(|v| v.is_some()).count();
+            return m.missing(format!("{missing_why} ({have} of {} runs)", values.len()));
+        }
+        let v: Vec<f64> = values.into_iter().flatten().collect();
+        let stats = OverSeeds::of(&v, self.reps, &mut self.rng);
+        m.mean = Some(stats.mean);
+        m.std = Some(stats.std);
+        m.ci95 = stats.ci95;
+        m.per_seed = v;
+        notes.sort();
+        notes.dedup();
+        if !notes.is_empty() {
+            m.note = Some(notes.join("; "));
+        }
+        m
+    }
 }

@@ -4,7 +4,9 @@
 use std::collections::BTreeMap;
 use std::fmt::Write;
 
-use super::{Group, GroupReport};
+use a2perf_core::LearningCurve;
+
+use super::model::{Category, GroupReport};
 use a2perf_metrics::numeric::percentile_sorted_lerp;
 
 pub(super) const PALETTE: [&str; 8] = [
@@ -48,8 +50,8 @@ pub fn radar(task: &str, groups: &[&GroupReport]) -> String {
                 })
                 .map(|m| {
                     let phase = match m.category {
-                        super::Category::SystemTraining => "Train. ",
-                        super::Category::SystemInference => "Inf. ",
+                        Category::SystemTraining => "Train. ",
+                        Category::SystemInference => "Inf. ",
                         _ => "",
                     };
                     let label = format!("{phase}{}", m.label);
@@ -256,17 +258,18 @@ pub(super) fn frame(
 }
 
 /// Training curves of one task: per algorithm the median evaluation return over seeds at each
-/// evaluation step, with the interquartile range shaded.
-pub fn curves(task: &str, groups: &[&Group]) -> String {
+/// evaluation step, with the interquartile range shaded. `groups` are the task's algorithms,
+/// each with the learning curves of its seeds.
+pub fn curves(task: &str, groups: &[(&str, Vec<&LearningCurve>)]) -> String {
     let (w, h) = (720.0, 440.0);
     let (l, r, t, b) = (70.0, 150.0, 40.0, 50.0);
     let (pw, ph) = (w - l - r, h - t - b);
     // Per algorithm: step -> (q25, median, q75).
     let mut series: Vec<(String, Vec<QuartilePoint>)> = Vec::new();
-    for g in groups {
+    for (algorithm, seed_curves) in groups {
         let mut at: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
-        for run in &g.runs {
-            for p in &run.curve.points {
+        for curve in seed_curves {
+            for p in &curve.points {
                 if p.mean_return.is_finite() {
                     at.entry(p.env_steps).or_default().push(p.mean_return);
                 }
@@ -284,7 +287,7 @@ pub fn curves(task: &str, groups: &[&Group]) -> String {
                 )
             })
             .collect();
-        series.push((g.algorithm.clone(), pts));
+        series.push((algorithm.to_string(), pts));
     }
     let all = series.iter().flat_map(|(_, p)| p.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (

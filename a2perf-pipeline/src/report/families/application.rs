@@ -1,12 +1,13 @@
 //! Application: the returns of the inference rollouts and the generalization sum over the
 //! suite's tasks.
 
-use super::super::{Category::Application, MetricValue, RunData};
-use super::Seeds;
+use crate::report::load::RunData;
+use crate::report::model::{Category::Application, MetricValue};
+use crate::report::statistics::Seeds;
 
 /// `returns` (the mean rollout return of each seed) and `generalization` (each seed's sum of
 /// mean returns over the generalization tasks).
-pub(super) fn metrics(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> {
+pub(crate) fn metrics(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> {
     // Runs not yet inferred or generalized take the episode counts their config asks for.
     let first = &runs[0].run.record;
     let returns: Vec<Option<f64>> = runs

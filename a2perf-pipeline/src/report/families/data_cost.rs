@@ -1,13 +1,13 @@
 //! Data cost: the training sample cost of an offline dataset, and that cost plus the training
 //! energy.
 
-use super::super::{Category::DataCost, MetricValue, RunData};
-use super::Seeds;
-use super::system::{ENERGY_NAMES, meter_value};
+use crate::report::load::RunData;
+use crate::report::model::{Category::DataCost, ENERGY_NAMES, MetricValue, meter_value};
+use crate::report::statistics::Seeds;
 
 /// `training_sample_cost` and `total_energy`, not applicable when no run learned from a
 /// dataset.
-pub(super) fn metrics(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> {
+pub(crate) fn metrics(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> {
     let sample_cost = MetricValue::new(
         DataCost,
         "training_sample_cost",

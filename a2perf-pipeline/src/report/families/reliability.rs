@@ -1,12 +1,13 @@
 //! Reliability: A2Perf's seven metrics, five over the training curves and two over the pooled
 //! inference rollouts (`a2perf_metrics::a2perf`).
 
-use super::super::{Category, MetricValue, RunData};
 use crate::CURVE_JSON;
+use crate::report::load::RunData;
+use crate::report::model::{Category, MetricValue};
 
 /// The seven reliability metrics; each says why when it cannot be computed. A config asking
 /// for the chan2019 definitions gets A2Perf's here, with a note saying how to score the other.
-pub(super) fn metrics(runs: &[RunData]) -> Vec<MetricValue> {
+pub(crate) fn metrics(runs: &[RunData]) -> Vec<MetricValue> {
     let mut rel = computed(runs);
     if runs
         .iter()

@@ -4,21 +4,14 @@
 
 use a2perf_core::{MeterReport, Provenance};
 
-use super::super::{Category, MetricValue, RunData};
-use super::Seeds;
-use crate::plan::ObservationSource;
+use crate::report::load::RunData;
+use crate::report::model::{Category, ENERGY_NAMES, MetricValue, PEAK_RAM_NAMES, meter_value};
+use crate::report::statistics::Seeds;
+use crate::spec::ObservationSource;
 use crate::train::PhaseSystem;
 
-/// Names under which the system meters report each quantity (first match wins).
-pub(in crate::report) const ENERGY_NAMES: &[&str] = &[
-    "energy_total_kwh",
-    "total_energy_kwh",
-    "energy_kwh",
-    "energy_consumed_kwh",
-];
 const GPU_POWER_NAMES: &[&str] = &["gpu_power_w"];
 const MEAN_RAM_NAMES: &[&str] = &["mean_ram_gb", "ram_mean_gb"];
-pub(in crate::report) const PEAK_RAM_NAMES: &[&str] = &["peak_ram_gb", "ram_peak_gb"];
 
 /// Where a system metric comes from.
 #[derive(Clone, Copy)]
@@ -34,7 +27,7 @@ enum Source {
 type Specs = [(&'static str, &'static str, &'static str, Source)];
 
 /// The training half: `energy`, `power`, `gpu_power`, `mean_ram`, `peak_ram`, `wall_clock`.
-pub(super) fn training(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> {
+pub(crate) fn training(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> {
     use Source::*;
     let cat = Category::SystemTraining;
     let train: Vec<Option<&PhaseSystem>> = runs.iter().map(|r| r.train_system.as_ref()).collect();
@@ -62,7 +55,7 @@ pub(super) fn training(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> 
 
 /// The inference half: `inference_time`, `inference_power`, `inference_gpu_power`,
 /// `inference_energy`, `inference_mean_ram`, `inference_peak_ram`.
-pub(super) fn inference(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> {
+pub(crate) fn inference(runs: &[RunData], seeds: &mut Seeds) -> Vec<MetricValue> {
     use Source::*;
     let cat = Category::SystemInference;
     let inf: Vec<Option<&PhaseSystem>> = runs
@@ -150,18 +143,6 @@ fn inference_time_note(runs: &[RunData]) -> String {
         "per call; the seeds differ in what was timed (rollout observations or random samples)"
             .into()
     }
-}
-
-/// A system measurement looked up under any of `names`, with its provenance.
-pub(in crate::report) fn meter_value(
-    report: &MeterReport,
-    names: &[&str],
-) -> Option<(Option<f64>, Provenance)> {
-    names.iter().find_map(|n| {
-        report
-            .get(n)
-            .map(|m| (m.value.filter(|v| v.is_finite()), m.provenance.clone()))
-    })
 }
 
 /// A meter's measurement across the runs of a group, with provenance notes; missing, with the
