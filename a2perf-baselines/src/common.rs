@@ -1,14 +1,14 @@
 //! Pieces shared by the algorithms: hyperparameter reading, environment setup, network choice.
 
 use a2perf_core::{
-    EnvSpec, ParamKind, ParamSpec, Params, RngStream, RunError, Space, TrainingContext, Value,
-    VecEnv, VecStep,
+    Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError, Space,
+    TrainingContext, Value, VecEnv, VecStep,
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
 use crate::model::{DiscreteNet, GaussianArch, NetOptions};
 use crate::nn::optim::LrSchedule;
-use crate::policy::Head;
+use crate::policy::{Head, NetPolicy};
 use crate::replay::ReplayBuffer;
 
 pub(crate) fn hp(e: a2perf_core::ParamError) -> RunError {
@@ -244,4 +244,51 @@ pub(crate) fn push_transitions(
         )?;
     }
     write_observations(cur, outs)
+}
+
+/// An online algorithm's run between its setup and its end: one iteration of its loop (act,
+/// step the environments, learn), its step count, its resume state and its environments.
+/// [`drive`] runs the loop the same way for every algorithm.
+pub(crate) trait OnlineRun {
+    /// Continues from a state written by [`save_state`](Self::save_state).
+    fn restore(
+        &mut self,
+        bytes: &[u8],
+        policy: &mut NetPolicy,
+        ctx: &mut TrainingContext<'_>,
+    ) -> Result<(), RunError>;
+    /// Resets every environment and stores the first observations (a fresh start).
+    fn reset(&mut self) -> Result<(), RunError>;
+    /// One iteration of the loop.
+    fn iterate(&mut self, policy: &mut NetPolicy) -> Result<(), RunError>;
+    /// Environment steps taken so far.
+    fn env_steps(&self) -> u64;
+    /// Everything the run needs to continue exactly, besides what the context keeps.
+    fn save_state(&self, policy: &NetPolicy) -> Vec<u8>;
+    /// Closes the environments.
+    fn close(&mut self) -> Result<(), RunError>;
+}
+
+/// Runs `run` from its resume state (or a reset) until the context stops it, then evaluates
+/// and checkpoints the final policy and closes the environments.
+pub(crate) fn drive(
+    mut run: impl OnlineRun,
+    mut policy: NetPolicy,
+    resume: Option<Vec<u8>>,
+    ctx: &mut TrainingContext<'_>,
+) -> Result<Box<dyn Policy>, RunError> {
+    match &resume {
+        Some(bytes) => run.restore(bytes, &mut policy, ctx)?,
+        None => run.reset()?,
+    }
+    loop {
+        run.iterate(&mut policy)?;
+        let save = |p: &NetPolicy| Ok(run.save_state(p));
+        if ctx.progress_resumable(run.env_steps(), &mut policy, save)? == Control::Stop {
+            break;
+        }
+    }
+    ctx.finish(run.env_steps(), &mut policy)?;
+    run.close()?;
+    Ok(Box::new(policy))
 }

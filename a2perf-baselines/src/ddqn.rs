@@ -3,8 +3,8 @@
 //! exploration over legal actions; uniform replay of configurable capacity.
 
 use a2perf_core::{
-    Action, Algorithm, Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, PolicyError,
-    RngStream, RunError, Space, TrainingContext, Value, VecEnv,
+    Action, Algorithm, EnvSpec, ParamKind, ParamSpec, Params, Policy, PolicyError, RngStream,
+    RunError, Space, TrainingContext, Value, VecEnv,
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
@@ -180,23 +180,8 @@ impl Algorithm for Ddqn {
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
         let resume = ctx.take_resume_state();
         let (venv, spec) = make_vec_env(ctx)?;
-        let (mut policy, mut run) = DdqnRun::new(self.config.clone(), venv, &spec, ctx)?;
-        match &resume {
-            Some(bytes) => run.restore(bytes, &mut policy, ctx)?,
-            None => write_observations(&mut run.cur, run.venv.reset_all()?)?,
-        }
-        loop {
-            run.choose_actions(&mut policy)?;
-            run.step_envs()?;
-            run.learn(&mut policy)?;
-            let save = |p: &NetPolicy| Ok(run.save_state(p));
-            if ctx.progress_resumable(run.env_steps, &mut policy, save)? == Control::Stop {
-                break;
-            }
-        }
-        ctx.finish(run.env_steps, &mut policy)?;
-        run.venv.close()?;
-        Ok(Box::new(policy))
+        let (policy, run) = DdqnRun::new(self.config.clone(), venv, &spec, ctx)?;
+        drive(run, policy, resume, ctx)
     }
 }
 
@@ -284,8 +269,8 @@ impl DdqnRun {
         Ok((policy, run))
     }
 
-    /// Continues from a state written by [`save_state`](Self::save_state).
-    fn restore(
+    /// Continues from a state written by [`state_bytes`](Self::state_bytes).
+    fn restore_state(
         &mut self,
         bytes: &[u8],
         policy: &mut NetPolicy,
@@ -306,7 +291,7 @@ impl DdqnRun {
     }
 
     /// The state [`restore`](Self::restore) continues from.
-    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+    fn state_bytes(&self, policy: &NetPolicy) -> Vec<u8> {
         let mut w = StateWriter::new("ddqn", STATE_VERSION);
         policy.save_training_state(&mut w);
         w.f32s(&self.target_params);
@@ -427,5 +412,39 @@ impl DdqnRun {
         if self.updates.is_multiple_of(cfg.target_update_period) {
             polyak(&mut self.target_params, params, cfg.target_tau);
         }
+    }
+}
+
+impl OnlineRun for DdqnRun {
+    fn restore(
+        &mut self,
+        bytes: &[u8],
+        policy: &mut NetPolicy,
+        ctx: &mut TrainingContext<'_>,
+    ) -> Result<(), RunError> {
+        self.restore_state(bytes, policy, ctx)
+    }
+
+    fn reset(&mut self) -> Result<(), RunError> {
+        write_observations(&mut self.cur, self.venv.reset_all()?)
+    }
+
+    fn iterate(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+        let run = self;
+        run.choose_actions(policy)?;
+        run.step_envs()?;
+        run.learn(policy)
+    }
+
+    fn env_steps(&self) -> u64 {
+        self.env_steps
+    }
+
+    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+        self.state_bytes(policy)
+    }
+
+    fn close(&mut self) -> Result<(), RunError> {
+        Ok(self.venv.close()?)
     }
 }

@@ -8,7 +8,7 @@
 //! with a state-independent log-std (separate actor and value MLPs, as TF-Agents).
 
 use a2perf_core::{
-    Action, Algorithm, Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError,
+    Action, Algorithm, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError,
     TrainingContext, Value, VecEnv,
 };
 
@@ -253,25 +253,9 @@ impl Algorithm for Ppo {
         let resume = ctx.take_resume_state();
         let (venv, spec) = make_vec_env(ctx)?;
         let layout = ObsLayout::from_spec(&spec)?;
-        let mut policy = self.initial_policy(ctx, &spec, &layout)?;
-        let mut run = PpoRun::new(self.config.clone(), venv, &layout, &policy, ctx);
-        match &resume {
-            Some(bytes) => run.restore(bytes, &mut policy, ctx)?,
-            None => write_observations(&mut run.raw, run.venv.reset_all()?)?,
-        }
-        loop {
-            run.collect_rollout(&mut policy)?;
-            run.compute_advantages(&mut policy);
-            run.optimise(&mut policy);
-            check_finite("PPO parameters", &policy.params)?;
-            let save = |p: &NetPolicy| Ok(run.save_state(p));
-            if ctx.progress_resumable(run.env_steps, &mut policy, save)? == Control::Stop {
-                break;
-            }
-        }
-        ctx.finish(run.env_steps, &mut policy)?;
-        run.venv.close()?;
-        Ok(Box::new(policy))
+        let policy = self.initial_policy(ctx, &spec, &layout)?;
+        let run = PpoRun::new(self.config.clone(), venv, &layout, &policy, ctx);
+        drive(run, policy, resume, ctx)
     }
 }
 
@@ -408,8 +392,8 @@ impl PpoRun {
         }
     }
 
-    /// Continues from a state written by [`save_state`](Self::save_state).
-    fn restore(
+    /// Continues from a state written by [`state_bytes`](Self::state_bytes).
+    fn restore_state(
         &mut self,
         bytes: &[u8],
         policy: &mut NetPolicy,
@@ -436,7 +420,7 @@ impl PpoRun {
     }
 
     /// The state [`restore`](Self::restore) continues from.
-    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+    fn state_bytes(&self, policy: &NetPolicy) -> Vec<u8> {
         let mut w = StateWriter::new("ppo", STATE_VERSION);
         policy.save_training_state(&mut w);
         self.adam.save(&mut w);
@@ -764,4 +748,39 @@ pub(crate) fn clip_action(space: &a2perf_core::Space, a: &[f32], slot: &mut Acti
         _ => v.extend_from_slice(a),
     }
     Action::Continuous(v)
+}
+
+impl OnlineRun for PpoRun {
+    fn restore(
+        &mut self,
+        bytes: &[u8],
+        policy: &mut NetPolicy,
+        ctx: &mut TrainingContext<'_>,
+    ) -> Result<(), RunError> {
+        self.restore_state(bytes, policy, ctx)
+    }
+
+    fn reset(&mut self) -> Result<(), RunError> {
+        write_observations(&mut self.raw, self.venv.reset_all()?)
+    }
+
+    fn iterate(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+        let run = self;
+        run.collect_rollout(policy)?;
+        run.compute_advantages(policy);
+        run.optimise(policy);
+        check_finite("PPO parameters", &policy.params)
+    }
+
+    fn env_steps(&self) -> u64 {
+        self.env_steps
+    }
+
+    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+        self.state_bytes(policy)
+    }
+
+    fn close(&mut self) -> Result<(), RunError> {
+        Ok(self.venv.close()?)
+    }
 }

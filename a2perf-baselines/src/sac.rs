@@ -3,8 +3,8 @@
 //! `SacAgent`. Actions are a tanh-squashed Gaussian mapped affinely onto the box bounds.
 
 use a2perf_core::{
-    Action, Algorithm, Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError,
-    Space, TrainingContext, Value, VecEnv,
+    Action, Algorithm, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError, Space,
+    TrainingContext, Value, VecEnv,
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
@@ -205,23 +205,8 @@ impl Algorithm for Sac {
     fn train(&mut self, ctx: &mut TrainingContext<'_>) -> Result<Box<dyn Policy>, RunError> {
         let resume = ctx.take_resume_state();
         let (venv, spec) = make_vec_env(ctx)?;
-        let (mut policy, mut run) = SacRun::new(self.config.clone(), venv, &spec, ctx)?;
-        match &resume {
-            Some(bytes) => run.restore(bytes, &mut policy, ctx)?,
-            None => write_observations(&mut run.cur, run.venv.reset_all()?)?,
-        }
-        loop {
-            run.choose_actions(&mut policy);
-            run.step_envs()?;
-            run.learn(&mut policy)?;
-            let save = |p: &NetPolicy| Ok(run.save_state(p));
-            if ctx.progress_resumable(run.env_steps, &mut policy, save)? == Control::Stop {
-                break;
-            }
-        }
-        ctx.finish(run.env_steps, &mut policy)?;
-        run.venv.close()?;
-        Ok(Box::new(policy))
+        let (policy, run) = SacRun::new(self.config.clone(), venv, &spec, ctx)?;
+        drive(run, policy, resume, ctx)
     }
 }
 
@@ -397,8 +382,8 @@ impl SacRun {
         Ok((policy, run))
     }
 
-    /// Continues from a state written by [`save_state`](Self::save_state).
-    fn restore(
+    /// Continues from a state written by [`state_bytes`](Self::state_bytes).
+    fn restore_state(
         &mut self,
         bytes: &[u8],
         policy: &mut NetPolicy,
@@ -425,7 +410,7 @@ impl SacRun {
     }
 
     /// The state [`restore`](Self::restore) continues from.
-    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+    fn state_bytes(&self, policy: &NetPolicy) -> Vec<u8> {
         let mut w = StateWriter::new("sac", STATE_VERSION);
         policy.save_training_state(&mut w);
         for c in &self.critics {
@@ -741,5 +726,39 @@ fn concat_obs_action(x: &[f32], a: &[f32], b: usize, od: usize, d: usize, out: &
         let o = &mut out[k * (od + d)..(k + 1) * (od + d)];
         o[..od].copy_from_slice(&x[k * od..(k + 1) * od]);
         o[od..].copy_from_slice(&a[k * d..(k + 1) * d]);
+    }
+}
+
+impl OnlineRun for SacRun {
+    fn restore(
+        &mut self,
+        bytes: &[u8],
+        policy: &mut NetPolicy,
+        ctx: &mut TrainingContext<'_>,
+    ) -> Result<(), RunError> {
+        self.restore_state(bytes, policy, ctx)
+    }
+
+    fn reset(&mut self) -> Result<(), RunError> {
+        write_observations(&mut self.cur, self.venv.reset_all()?)
+    }
+
+    fn iterate(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+        let run = self;
+        run.choose_actions(policy);
+        run.step_envs()?;
+        run.learn(policy)
+    }
+
+    fn env_steps(&self) -> u64 {
+        self.env_steps
+    }
+
+    fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
+        self.state_bytes(policy)
+    }
+
+    fn close(&mut self) -> Result<(), RunError> {
+        Ok(self.venv.close()?)
     }
 }
