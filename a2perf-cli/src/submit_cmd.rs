@@ -293,6 +293,8 @@ fn phase(python: &Path, folder: &Path, task: &serde_json::Value, name: &str) -> 
             "{}: the participant folder cannot be run (see above)",
             folder.display()
         ),
+        // Ctrl-C reached the child too: its run is marked interrupted.
+        Some(130) => Err(pipeline::PipelineError::Cancelled.into()),
         _ => bail!("{name}: the child process stopped ({status})"),
     }
 }

@@ -178,6 +178,29 @@ def test_a_template_folder_that_ignores_the_harness_still_trains(tmp_path) -> No
     assert (tmp_path / "runs" / "template" / "report" / "report.md").is_file()
 
 
+def test_preprocess_observation_may_take_the_info_dict_with_the_mask(tmp_path) -> None:
+    d = folder(tmp_path, "masked", """
+        def train(offset):
+            pass
+    """, """
+        import numpy as np
+
+        def load_policy(env, offset="0"):
+            return int(offset)
+
+        def preprocess_observation(observation, info):
+            return np.flatnonzero(info["action_mask"])
+
+        def infer_once(policy, preprocessed_observation):
+            return int(preprocessed_observation[policy % len(preprocessed_observation)])
+    """)
+    submit(str(d), CONFIG, "--seeds", "0", "--root-dir", str(tmp_path / "runs"),
+           "--participant-args", "offset=5", "--python", sys.executable, *SMALL)
+    run = next((tmp_path / "runs" / "masked").glob("*seed0"))
+    assert read(run / "inference.json")["episodes"] == 6
+    assert read(run / "run.json")["algorithm"]["params"] == {"offset": "5"}
+
+
 def test_a_participant_exception_fails_the_run_and_shows_its_traceback(tmp_path) -> None:
     d = folder(tmp_path, "broken", """
         def train(**kwargs):
