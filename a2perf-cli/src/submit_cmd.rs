@@ -27,23 +27,17 @@ use clap::Args;
 /// Arguments of `a2perf submit`.
 #[derive(Args, Debug)]
 pub struct SubmitArgs {
-    /// The participant folder: `train.py`, `inference.py`, `requirements.txt`.
-    #[arg(
-        value_name = "PARTICIPANT_DIR",
-        required_unless_present = "participant_module_path"
-    )]
-    pub participant: Option<PathBuf>,
-    /// The experiment config whose task, profile, generalization suite and settings the
-    /// submission is scored on (its algorithm is replaced by the folder), e.g.
-    /// `configs/circuit_training/ppo.ron`.
-    #[arg(value_name = "CONFIG")]
-    pub config: PathBuf,
+    /// `PARTICIPANT_DIR CONFIG`: the participant folder (`train.py`, `inference.py`,
+    /// `requirements.txt`) and the experiment config whose task, profile, generalization suite
+    /// and settings the submission is scored on (its algorithm is replaced by the folder), e.g.
+    /// `configs/circuit_training/ppo.ron`. Only `CONFIG` with `--participant-module-path`.
+    #[arg(value_name = "PARTICIPANT_DIR> <CONFIG", required = true, num_args = 1..=2)]
+    pub paths: Vec<PathBuf>,
     /// The participant folder, as the original's flag.
     #[arg(
         long = "participant-module-path",
         visible_alias = "participant_module_path",
-        value_name = "DIR",
-        conflicts_with = "participant"
+        value_name = "DIR"
     )]
     pub participant_module_path: Option<PathBuf>,
     /// Keyword arguments of `train(**participant_args)` and `load_policy(env,
@@ -301,11 +295,14 @@ fn phase(python: &Path, folder: &Path, task: &serde_json::Value, name: &str) -> 
 
 /// `a2perf submit`.
 pub fn submit(registry: &Registry, args: &SubmitArgs) -> Result<()> {
-    let given = args
-        .participant
-        .as_deref()
-        .or(args.participant_module_path.as_deref())
-        .context("give the participant folder")?;
+    let (given, config) = match (&args.participant_module_path, args.paths.as_slice()) {
+        (None, [dir, config]) => (dir, config),
+        (Some(dir), [config]) => (dir, config),
+        (None, _) => bail!("give the participant folder and the experiment config"),
+        (Some(_), _) => {
+            bail!("with --participant-module-path, give only the experiment config as an argument")
+        }
+    };
     let folder = check_folder(given)?;
     let participant_args = parse_participant_args(args.participant_args.as_deref().unwrap_or(""))?;
     let name = match &args.name {
@@ -316,14 +313,14 @@ pub fn submit(registry: &Registry, args: &SubmitArgs) -> Result<()> {
             .context("name the agent with --name")?,
     };
     let invalid = |e: a2perf_core::config::ConfigError| anyhow::anyhow!("{e}");
-    let exp = a2perf_core::Experiment::load(&args.config, &args.set, registry).map_err(invalid)?;
+    let exp = a2perf_core::Experiment::load(config, &args.set, registry).map_err(invalid)?;
     let seeds = match &args.seeds {
         Some(s) => pipeline::parse_seeds(s)?,
         None => exp.seeds.clone(),
     };
     // The children plan the same runs from another working directory.
     let output = std::path::absolute(args.root_dir.as_ref().unwrap_or(&exp.output.dir))?;
-    let config = std::path::absolute(&args.config)?;
+    let config = std::path::absolute(config)?;
     let cwd = std::env::current_dir().context("the working directory")?;
     // Every run is planned before any Python starts: a bad config, name or seed fails here.
     let mut plans = Vec::new();
@@ -462,6 +459,38 @@ fn print_results(run_dir: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        submit: SubmitArgs,
+    }
+
+    #[test]
+    fn the_folder_comes_first_or_from_the_originals_flag() {
+        let a = Cli::try_parse_from(["submit", "dir", "c.ron"])
+            .unwrap()
+            .submit;
+        assert_eq!(a.paths, [PathBuf::from("dir"), PathBuf::from("c.ron")]);
+        let a = Cli::try_parse_from([
+            "submit",
+            "--participant_module_path",
+            "dir",
+            "c.ron",
+            "--participant_args",
+            "a=1",
+            "--root_dir",
+            "out",
+        ])
+        .unwrap()
+        .submit;
+        assert_eq!(a.paths, [PathBuf::from("c.ron")]);
+        assert_eq!(a.participant_module_path, Some(PathBuf::from("dir")));
+        assert_eq!(a.participant_args.as_deref(), Some("a=1"));
+        assert_eq!(a.root_dir, Some(PathBuf::from("out")));
+        assert!(Cli::try_parse_from(["submit"]).is_err());
+    }
 
     #[test]
     fn participant_args_are_strings_by_key() {
