@@ -244,8 +244,6 @@ class _SubmissionRun(TrainingRun):
 def _train(spec: dict[str, Any], folder: Path) -> None:
     global _ACTIVE
     args = spec["participant_args"]
-    with _cwd(folder):
-        train = _import(folder, "train", "train")
     run = _SubmissionRun(
         spec["output"],
         algorithm=spec["algorithm"],
@@ -268,6 +266,8 @@ def _train(spec: dict[str, Any], folder: Path) -> None:
             shutil.copytree(folder, spec["code_dir"], ignore=_not_code, dirs_exist_ok=True)
             Path(spec["files_dir"]).mkdir(parents=True, exist_ok=True)
             with _cwd(folder):
+                # Imported under the meters: what train.py imports is part of the job.
+                train = _import(folder, "train", "train")
                 train(**args)
             if run._native.evaluations() == 0:
                 # A folder that logs nothing gets one point: its final policy evaluated by the

@@ -158,6 +158,18 @@ TEMPLATE_INFERENCE = """
 """
 
 
+FIRST_LEGAL_CELL = """
+    def load_policy(env):
+        return None
+
+    def preprocess_observation(observation):
+        return observation["grid"][2].reshape(-1)  # the legality channel: the action mask
+
+    def infer_once(policy, preprocessed_observation):
+        return int(preprocessed_observation.argmax())
+"""
+
+
 def test_a_template_folder_that_ignores_the_harness_still_trains(tmp_path) -> None:
     # The template's load_model(env) and infer_once(model, observation), a train() that uses
     # nothing of the harness but the original's ROOT_DIR and logs no evaluation.
@@ -199,6 +211,24 @@ def test_preprocess_observation_may_take_the_info_dict_with_the_mask(tmp_path) -
     run = next((tmp_path / "runs" / "masked").glob("*seed0"))
     assert read(run / "inference.json")["episodes"] == 6
     assert read(run / "run.json")["algorithm"]["params"] == {"offset": "5"}
+
+
+def test_the_training_meters_cover_the_processes_train_starts(tmp_path) -> None:
+    # train() starts a process that holds 400 MB for a second: the run's peak RAM counts it.
+    d = folder(tmp_path, "spawner", """
+        import subprocess
+        import sys
+
+        def train():
+            code = "import time; b = b'x' * 400_000_000; time.sleep(1.0)"
+            subprocess.run([sys.executable, "-c", code], check=True)
+    """, FIRST_LEGAL_CELL)
+    submit(str(d), CONFIG, "--seeds", "0", "--root-dir", str(tmp_path / "runs"),
+           "--python", sys.executable, "--set", "metrics.ram_sample_interval_s=0.05", *SMALL)
+    run = next((tmp_path / "runs" / "spawner").glob("*seed0"))
+    peak = {m["name"]: m["value"]
+            for m in read(run / "train_system.json")["meters"]["measurements"]}["peak_ram_gb"]
+    assert peak > 0.4, peak
 
 
 def test_a_participant_exception_fails_the_run_and_shows_its_traceback(tmp_path) -> None:
