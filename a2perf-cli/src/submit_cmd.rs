@@ -387,10 +387,11 @@ pub fn submit(registry: &Registry, args: &SubmitArgs) -> Result<()> {
             eprintln!("== train {} (seed {seed})", folder.display());
             if !phase(&python, &folder, &task, "train")? {
                 eprintln!(
-                    "{}: train() raised (traceback above); the run is marked failed",
+                    "{}: training raised (traceback above: train(), or the evaluation of its \
+                     final policy when it logged none); the run is marked failed",
                     run_dir.display()
                 );
-                failures.push(format!("{}: train() raised", run_dir.display()));
+                failures.push(format!("{}: training raised", run_dir.display()));
                 continue;
             }
         }

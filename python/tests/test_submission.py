@@ -206,11 +206,35 @@ def test_preprocess_observation_may_take_the_info_dict_with_the_mask(tmp_path) -
         def infer_once(policy, preprocessed_observation):
             return int(preprocessed_observation[policy % len(preprocessed_observation)])
     """)
-    submit(str(d), CONFIG, "--seeds", "0", "--root-dir", str(tmp_path / "runs"),
+    submit(str(d), CONFIG, "--seeds", "0,1", "--root-dir", str(tmp_path / "runs"),
            "--participant-args", "offset=5", "--python", sys.executable, *SMALL)
-    run = next((tmp_path / "runs" / "masked").glob("*seed0"))
-    assert read(run / "inference.json")["episodes"] == 6
-    assert read(run / "run.json")["algorithm"]["params"] == {"offset": "5"}
+    runs = sorted((tmp_path / "runs" / "masked").glob("*seed*"))
+    assert [r.name[-5:] for r in runs] == ["seed0", "seed1"]
+    for run in runs:
+        assert read(run / "inference.json")["episodes"] == 6
+        assert read(run / "run.json")["algorithm"]["params"] == {"offset": "5"}
+    board = read(tmp_path / "runs" / "masked" / "report" / "leaderboard.json")
+    assert [e["seeds"] for e in board["entries"]] == [[0, 1]], board["entries"]
+
+
+def test_an_exception_in_infer_once_names_the_step_and_writes_no_inference(tmp_path) -> None:
+    train = """
+        from a2perf_rs import submission
+
+        def train():
+            submission.training_run().log_evaluation(1, 0.0)
+    """
+    d = folder(tmp_path, "bad_infer", train, FIRST_LEGAL_CELL.replace(
+        "return int(preprocessed_observation.argmax())", "raise KeyError('no such cell')"))
+    out = submit(str(d), CONFIG, "--seeds", "0", "--root-dir", str(tmp_path / "runs"),
+                 "--python", sys.executable, *SMALL, check=False)
+    assert out.returncode != 0
+    assert "KeyError" in out.stderr and "no such cell" in out.stderr, out.stderr
+    assert "episode 0, step 0" in out.stderr, out.stderr
+    assert "inference code raised" in out.stderr, out.stderr
+    run = next((tmp_path / "runs" / "bad_infer").glob("*seed0"))
+    assert read(run / "status.json")["state"] == "complete"  # training did not fail
+    assert not (run / "inference.json").exists()
 
 
 def test_the_training_meters_cover_the_processes_train_starts(tmp_path) -> None:
@@ -242,7 +266,7 @@ def test_a_participant_exception_fails_the_run_and_shows_its_traceback(tmp_path)
                  "--python", sys.executable, *SMALL, check=False)
     assert out.returncode != 0
     assert "ZeroDivisionError" in out.stderr and "train.py" in out.stderr, out.stderr
-    assert "train() raised" in out.stderr and "marked failed" in out.stderr, out.stderr
+    assert "training raised" in out.stderr and "marked failed" in out.stderr, out.stderr
     run = next((tmp_path / "runs" / "broken").glob("*seed0"))
     status = read(run / "status.json")
     assert status["state"] == "failed" and "ZeroDivisionError" in status["note"], status
