@@ -11,6 +11,7 @@ mod list;
 mod locomotion_cmd;
 mod metrics_cmd;
 mod pipeline_cmd;
+mod submit_cmd;
 mod web_cmd;
 
 /// A2Perf: a benchmark for autonomous agents on chip placement, web navigation and quadruped
@@ -54,6 +55,9 @@ enum Command {
     Run(pipeline_cmd::RunArgs),
     /// Evaluate checkpoints, assign expertise levels and collect offline datasets.
     Collect(pipeline_cmd::CollectArgs),
+    /// Train, infer, generalize and report an A2Perf participant folder (train.py,
+    /// inference.py, requirements.txt) under the harness's meters, in a venv of its own.
+    Submit(submit_cmd::SubmitArgs),
 }
 
 /// The exit codes of `train` and `run`, shown by their `--help`.
@@ -140,5 +144,6 @@ fn run(cli: Cli) -> Result<()> {
         Command::Report(args) => pipeline_cmd::report(&args),
         Command::Run(args) => pipeline_cmd::run(&registry, &args),
         Command::Collect(args) => pipeline_cmd::collect(&registry, &args),
+        Command::Submit(args) => submit_cmd::submit(&registry, &args),
     }
 }

@@ -442,7 +442,7 @@ pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
     )
 }
 
-fn print_inference(dir: &Path, r: &pipeline::InferenceResults) {
+pub(crate) fn print_inference(dir: &Path, r: &pipeline::InferenceResults) {
     println!(
         "{}: return {:.3} ± {:.3} over {} episodes; inference {:.4} ms/call (p99 {:.4})",
         dir.display(),
@@ -478,7 +478,7 @@ pub fn infer(registry: &Registry, args: &InferArgs) -> Result<()> {
     infer_dirs(registry, &expand_runs(&args.dirs)?, &opts)
 }
 
-fn print_generalization(dir: &Path, r: &pipeline::GeneralizationResults) {
+pub(crate) fn print_generalization(dir: &Path, r: &pipeline::GeneralizationResults) {
     let per_task: Vec<String> = r
         .tasks
         .iter()
@@ -537,7 +537,7 @@ fn print_report(out: &Path, report: &pipeline::report::Report) {
     }
 }
 
-fn write_report(
+pub(crate) fn write_report(
     dirs: &[PathBuf],
     out: &Path,
     reps: Option<usize>,

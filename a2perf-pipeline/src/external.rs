@@ -120,7 +120,14 @@ fn interned(name: &str) -> &'static str {
     leaked
 }
 
-fn is_identifier(s: &str) -> bool {
+/// Whether `s` can name a hyperparameter (and a Python keyword argument): ASCII letters,
+/// digits and `_`, not starting with a digit.
+///
+/// ```
+/// use a2perf_pipeline::external::is_identifier;
+/// assert!(is_identifier("learning_rate") && !is_identifier("1st") && !is_identifier(""));
+/// ```
+pub fn is_identifier(s: &str) -> bool {
     let mut chars = s.chars();
     chars
         .next()

@@ -99,8 +99,8 @@ pub use run::{RunEvent, RunOptions, expand_runs, run_experiments};
 pub use run_dir::{
     CHECKPOINT_DIR, CURVE_CSV, CURVE_JSON, ExternalAgent, GENERALIZATION_FILE, INFERENCE_FILE,
     LoadedRun, OPERATIVE_FILE, POLICY_FILE, PolicySource, RESUME_DIR, RUN_FILE, RUN_FORMAT_VERSION,
-    RegistryPolicies, RunRecord, SYSTEM_INFO_FILE, TRAIN_SEGMENTS_FILE, TRAIN_SYSTEM_FILE,
-    find_runs, load_checkpoint_policy,
+    RegistryPolicies, RunRecord, SUBMISSION_CODE_DIR, SUBMISSION_FILES_DIR, SYSTEM_INFO_FILE,
+    TRAIN_SEGMENTS_FILE, TRAIN_SYSTEM_FILE, find_runs, load_checkpoint_policy,
 };
 pub use sysinfo::SystemInfo;
 pub use train::{RunOutcome, RunReport, TrainOptions, TrainSummary, train, train_one, train_run};

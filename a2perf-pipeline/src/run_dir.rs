@@ -69,6 +69,13 @@ pub const TRAIN_EMISSIONS_FILE: &str = "train_emissions.csv";
 /// The CodeCarbon-style row of each `infer`, in the run directory.
 pub const INFERENCE_EMISSIONS_FILE: &str = "inference_emissions.csv";
 
+/// `submission/code/`: a submission's participant folder as `a2perf submit` ran it (copied when
+/// its training starts, without its `.venv`, hidden files and caches).
+pub const SUBMISSION_CODE_DIR: &str = "submission/code";
+/// `submission/files/`: a submission's own files, what its `train()` saves for its
+/// `load_policy` (`a2perf_rs.submission.task().files_dir`).
+pub const SUBMISSION_FILES_DIR: &str = "submission/files";
+
 /// `collect/`: the run's checkpoint evaluations (`collect` writes them).
 pub const COLLECT_DIR: &str = "collect";
 /// `collect/evaluation.json`: every checkpoint's evaluation.

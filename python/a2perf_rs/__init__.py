@@ -10,7 +10,9 @@
   names of circuit_training's ``plc_client``;
 - :mod:`a2perf_rs.harness`: your own agent benchmarked like the built-in ones —
   :class:`TrainingRun` (run directory, system meters, seeded environments, curve, checkpoints),
-  :func:`infer`, :func:`generalize`, :func:`collect` with Python policies, and :func:`report`.
+  :func:`infer`, :func:`generalize`, :func:`collect` with Python policies, and :func:`report`;
+- :mod:`a2perf_rs.submission`: an A2Perf participant folder run by ``a2perf submit`` (the child
+  side, and ``task()`` / ``training_run()`` / ``make_env()`` for the folder's code).
 
 The import name is ``a2perf_rs`` so that the original ``a2perf`` package can be installed beside it.
 """
@@ -18,7 +20,7 @@ The import name is ``a2perf_rs`` so that the original ``a2perf`` package can be 
 import json
 from typing import Any
 
-from . import _native, circuit, metrics
+from . import _native, circuit, metrics, submission
 from ._native import BackendError, RunLockedError
 from .envs import A2PerfEnv, env_ids, env_params, register_all
 from .harness import TrainingRun, collect, generalize, infer, report
@@ -38,6 +40,7 @@ __all__ = [
     "infer",
     "report",
     "metrics",
+    "submission",
     "bench",
     "chromium_unavailable_reason",
     "env_ids",

@@ -153,11 +153,13 @@ class TrainingRun:
             set=[str(s) for s in set],
         )
         self.algorithm = algorithm
+        # What drives the run, as run.json records it (a2perf submit sets its own).
+        self._harness: str | None = None
 
     # -- the block ------------------------------------------------------------------------------
 
     def __enter__(self) -> TrainingRun:
-        for warning in self._native.begin(_runtime()):
+        for warning in self._native.begin(_runtime(), self._harness):
             warnings.warn(f"{self.run_dir}: {warning}", stacklevel=2)
         return self
 

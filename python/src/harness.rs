@@ -137,7 +137,9 @@ impl PyTrainingRun {
     }
 
     /// Creates the run directory and starts the meters; returns warnings for the user.
-    fn begin(&self, runtime: String) -> PyResult<Vec<String>> {
+    /// `harness`: what drives the run, as `run.json` records it (default: `TrainingRun`).
+    #[pyo3(signature = (runtime, harness=None))]
+    fn begin(&self, runtime: String, harness: Option<String>) -> PyResult<Vec<String>> {
         let mut stage = self.stage()?;
         if !matches!(*stage, Stage::Planned) {
             return Err(PyRuntimeError::new_err(
@@ -145,7 +147,8 @@ impl PyTrainingRun {
             ));
         }
         let agent = ExternalAgent {
-            harness: format!("a2perf_rs {} TrainingRun", env!("CARGO_PKG_VERSION")),
+            harness: harness
+                .unwrap_or_else(|| format!("a2perf_rs {} TrainingRun", env!("CARGO_PKG_VERSION"))),
             runtime,
         };
         let run = guard("starting the run", || {
@@ -206,7 +209,7 @@ impl PyTrainingRun {
         with_info: bool,
     ) -> PyResult<(f64, f64)> {
         self.running(|run| {
-            let source = CallablePolicies::new(policy, with_info);
+            let source = CallablePolicies::new(py, policy, with_info);
             let env = run.make_env().map_err(plain)?;
             let spec = env.spec().clone();
             drop(env);
@@ -219,6 +222,11 @@ impl PyTrainingRun {
     /// Copies the agent's checkpoint file into `checkpoints/`; returns the stored path.
     fn save_checkpoint(&self, env_steps: u64, path: PathBuf) -> PyResult<PathBuf> {
         self.running(|run| run.save_checkpoint(env_steps, &path).map_err(plain))
+    }
+
+    /// The number of evaluation points logged so far.
+    fn evaluations(&self) -> PyResult<usize> {
+        self.running(|run| Ok(run.curve().points.len()))
     }
 
     /// Seconds since the run began.
@@ -306,6 +314,7 @@ fn observation_source(s: Option<&str>) -> PyResult<Option<ObservationSource>> {
 #[pyfunction]
 #[pyo3(signature = (run_dir, policy, with_info, episodes=None, observation_source=None, timing_samples=None))]
 fn infer(
+    py: Python<'_>,
     run_dir: PathBuf,
     policy: Py<PyAny>,
     with_info: bool,
@@ -321,7 +330,7 @@ fn infer(
         meters: system_meters(),
         show_progress: false,
     };
-    let mut source = CallablePolicies::new(policy, with_info);
+    let mut source = CallablePolicies::new(py, policy, with_info);
     let results = guard("infer", || {
         a2perf_pipeline::infer_run_with(registry(), &run_dir, &mut source, &opts)
             .map_err(|e| pipeline_error(e, Some(&source.errors)))
@@ -333,13 +342,14 @@ fn infer(
 #[pyfunction]
 #[pyo3(signature = (run_dir, policy, with_info, episodes=None))]
 fn generalize(
+    py: Python<'_>,
     run_dir: PathBuf,
     policy: Py<PyAny>,
     with_info: bool,
     episodes: Option<usize>,
 ) -> PyResult<String> {
     external_run(&run_dir, "generalize")?;
-    let mut source = CallablePolicies::new(policy, with_info);
+    let mut source = CallablePolicies::new(py, policy, with_info);
     let results = guard("generalize", || {
         a2perf_pipeline::generalize_run_with(registry(), &run_dir, &mut source, episodes, false)
             .map_err(|e| pipeline_error(e, Some(&source.errors)))
@@ -439,6 +449,7 @@ fn episode_seed(seed: u64, index: usize, episode: u64) -> u64 {
 /// Adds the harness to the native module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyTrainingRun>()?;
+    m.add_class::<crate::policy::SubmissionPolicy>()?;
     m.add_function(wrap_pyfunction!(infer, m)?)?;
     m.add_function(wrap_pyfunction!(generalize, m)?)?;
     m.add_function(wrap_pyfunction!(collect, m)?)?;

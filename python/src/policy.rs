@@ -46,29 +46,136 @@ fn keep(slot: &ErrorSlot, failure: PolicyFailure) {
     }
 }
 
-/// A Python callable `obs -> action` (or `(obs, info) -> action`) for one environment.
+/// A submission's `inference.py` bound to the policy its `load_policy` returned (`a2perf
+/// submit`): `preprocess_observation(observation, **kwargs)` turns each observation into the
+/// policy's input outside the inference timer, and `infer_once` — the only timed call — maps it
+/// to an action, called as the original harness calls it (`infer_once(policy=…,
+/// preprocessed_observation=…)`) or, for the template's `infer_once(model, observation)`,
+/// positionally.
+#[pyclass(module = "a2perf_rs._native", name = "SubmissionPolicy", frozen)]
+pub struct SubmissionPolicy {
+    policy: Py<PyAny>,
+    preprocess: Py<PyAny>,
+    infer_once: Py<PyAny>,
+    keywords: bool,
+    preprocess_info: bool,
+    preprocess_kwargs: Py<PyDict>,
+}
+
+#[pymethods]
+impl SubmissionPolicy {
+    /// `keywords`: call `infer_once` with the original harness's keyword names;
+    /// `preprocess_info`: also pass `info=` (the action mask) to `preprocess_observation`;
+    /// `preprocess_kwargs`: further keywords it gets at every call (`time_step_spec`).
+    #[new]
+    #[pyo3(signature = (policy, preprocess_observation, infer_once, keywords, preprocess_info, preprocess_kwargs=None))]
+    fn new(
+        py: Python<'_>,
+        policy: Py<PyAny>,
+        preprocess_observation: Py<PyAny>,
+        infer_once: Py<PyAny>,
+        keywords: bool,
+        preprocess_info: bool,
+        preprocess_kwargs: Option<Py<PyDict>>,
+    ) -> Self {
+        Self {
+            policy,
+            preprocess: preprocess_observation,
+            infer_once,
+            keywords,
+            preprocess_info,
+            preprocess_kwargs: preprocess_kwargs.unwrap_or_else(|| PyDict::new(py).unbind()),
+        }
+    }
+}
+
+impl SubmissionPolicy {
+    fn preprocess<'py>(
+        &self,
+        py: Python<'py>,
+        observation: Bound<'py, PyAny>,
+        info: impl FnOnce() -> PyResult<Bound<'py, PyDict>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let kwargs = self.preprocess_kwargs.bind(py).copy()?;
+        if self.preprocess_info {
+            kwargs.set_item(pyo3::intern!(py, "info"), info()?)?;
+        }
+        self.preprocess.bind(py).call((observation,), Some(&kwargs))
+    }
+
+    fn infer_once<'py>(
+        &self,
+        py: Python<'py>,
+        preprocessed: Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let f = self.infer_once.bind(py);
+        if self.keywords {
+            let kwargs = PyDict::new(py);
+            kwargs.set_item(pyo3::intern!(py, "policy"), self.policy.bind(py))?;
+            kwargs.set_item(pyo3::intern!(py, "preprocessed_observation"), preprocessed)?;
+            f.call((), Some(&kwargs))
+        } else {
+            f.call1((self.policy.bind(py), preprocessed))
+        }
+    }
+}
+
+/// How a [`PyPolicy`] calls the agent's code.
+pub enum Calls {
+    /// `callable(obs)`, or `callable(obs, info)` when `with_info`.
+    Callable {
+        /// The agent's callable.
+        callable: Py<PyAny>,
+        /// Whether it takes the info dict.
+        with_info: bool,
+    },
+    /// A submission's `preprocess_observation` and `infer_once`.
+    Submission(Py<SubmissionPolicy>),
+}
+
+impl Calls {
+    /// A [`SubmissionPolicy`] as itself, any other object as a callable.
+    pub fn of(policy: Bound<'_, PyAny>, with_info: bool) -> Self {
+        match policy.cast_into::<SubmissionPolicy>() {
+            Ok(s) => Self::Submission(s.unbind()),
+            Err(e) => Self::Callable {
+                callable: e.into_inner().unbind(),
+                with_info,
+            },
+        }
+    }
+
+    fn clone_ref(&self, py: Python<'_>) -> Self {
+        match self {
+            Self::Callable {
+                callable,
+                with_info,
+            } => Self::Callable {
+                callable: callable.clone_ref(py),
+                with_info: *with_info,
+            },
+            Self::Submission(s) => Self::Submission(s.clone_ref(py)),
+        }
+    }
+}
+
+/// A Python callable `obs -> action` (or `(obs, info) -> action`), or a submission's
+/// `inference.py`, for one environment.
 pub struct PyPolicy {
-    callable: Py<PyAny>,
-    with_info: bool,
+    calls: Calls,
     layout: ObsLayout,
     action: ActionSpec,
     errors: ErrorSlot,
-    /// The arguments of the next call, converted by `prepare` outside the inference timer.
-    prepared: Option<Py<PyTuple>>,
+    /// The input of the next call, made by `prepare` outside the inference timer: the
+    /// callable's arguments, or the submission's preprocessed observation.
+    prepared: Option<Py<PyAny>>,
 }
 
 impl PyPolicy {
-    /// `callable` as the policy of an environment with `spec`; its failures go to `errors`.
-    pub fn new(
-        py: Python<'_>,
-        callable: Py<PyAny>,
-        with_info: bool,
-        spec: &EnvSpec,
-        errors: ErrorSlot,
-    ) -> PyResult<Self> {
+    /// `calls` as the policy of an environment with `spec`; its failures go to `errors`.
+    pub fn new(py: Python<'_>, calls: Calls, spec: &EnvSpec, errors: ErrorSlot) -> PyResult<Self> {
         Ok(Self {
-            callable,
-            with_info,
+            calls,
             layout: ObsLayout::of(py, &spec.observation_space)?,
             action: ActionSpec::of(&spec.action_space)?,
             errors,
@@ -76,30 +183,39 @@ impl PyPolicy {
         })
     }
 
-    /// The callable's arguments for `obs`: `(obs,)` or `(obs, info)`, fresh objects.
-    fn arguments<'py>(&self, py: Python<'py>, obs: &Observation) -> PyResult<Bound<'py, PyTuple>> {
+    /// The input of a call for `obs`, fresh objects: the callable's arguments `(obs,)` or
+    /// `(obs, info)`, or what the submission's `preprocess_observation` makes of `obs`.
+    fn input<'py>(&self, py: Python<'py>, obs: &Observation) -> PyResult<Bound<'py, PyAny>> {
         let o = self.layout.to_py(py, obs)?;
-        if self.with_info {
+        let info = || -> PyResult<Bound<'py, PyDict>> {
             let info = PyDict::new(py);
             if let Some(mask) = &obs.action_mask {
                 info.set_item(pyo3::intern!(py, "action_mask"), mask_to_py(py, mask))?;
             }
-            PyTuple::new(py, [o, info.into_any()])
-        } else {
-            PyTuple::new(py, [o])
+            Ok(info)
+        };
+        match &self.calls {
+            Calls::Callable {
+                with_info: true, ..
+            } => Ok(PyTuple::new(py, [o, info()?.into_any()])?.into_any()),
+            Calls::Callable { .. } => Ok(PyTuple::new(py, [o])?.into_any()),
+            Calls::Submission(s) => s.get().preprocess(py, o, info),
         }
     }
 
     fn call(&mut self, py: Python<'_>, obs: &Observation) -> Result<Action, PolicyFailure> {
-        let args = match self.prepared.take() {
-            Some(args) => args.into_bound(py),
-            None => self.arguments(py, obs).map_err(PolicyFailure::Raised)?,
+        let input = match self.prepared.take() {
+            Some(input) => input.into_bound(py),
+            None => self.input(py, obs).map_err(PolicyFailure::Raised)?,
         };
-        let returned = self
-            .callable
-            .bind(py)
-            .call1(args)
-            .map_err(PolicyFailure::Raised)?;
+        let returned = match &self.calls {
+            Calls::Callable { callable, .. } => input
+                .cast_into::<PyTuple>()
+                .map_err(PyErr::from)
+                .and_then(|args| callable.bind(py).call1(args)),
+            Calls::Submission(s) => s.get().infer_once(py, input),
+        }
+        .map_err(PolicyFailure::Raised)?;
         let mut action = match self.action {
             ActionSpec::Discrete(_) => Action::Discrete(0),
             ActionSpec::Box { .. } => Action::Continuous(Vec::new()),
@@ -132,13 +248,14 @@ impl Policy for PyPolicy {
     }
 
     /// Converts the observation (and the mask) into numpy arrays before the timer starts, as
-    /// the original harness's Gymnasium environment handed them over: the time of `act` is the
-    /// callable's, plus the call and the action check.
+    /// the original harness's Gymnasium environment handed them over, and runs a submission's
+    /// `preprocess_observation`, which the original did not time either: the time of `act` is
+    /// the callable's (or `infer_once`'s), plus the call and the action check.
     fn prepare(&mut self, obs: &Observation) -> Result<(), PolicyError> {
-        let args = Python::attach(|py| self.arguments(py, obs).map(Bound::unbind));
-        match args {
-            Ok(args) => {
-                self.prepared = Some(args);
+        let input = Python::attach(|py| self.input(py, obs).map(Bound::unbind));
+        match input {
+            Ok(input) => {
+                self.prepared = Some(input);
                 Ok(())
             }
             Err(e) => Err(self.failed(PolicyFailure::Raised(e))),
@@ -152,33 +269,27 @@ impl Policy for PyPolicy {
     }
 }
 
-/// One Python callable as every policy of a pipeline call (`a2perf_rs.infer`, `generalize`).
+/// One Python callable (or submission) as every policy of a pipeline call (`a2perf_rs.infer`,
+/// `generalize`).
 pub struct CallablePolicies {
-    callable: Py<PyAny>,
-    with_info: bool,
+    calls: Calls,
     /// Failures of its policies.
     pub errors: ErrorSlot,
 }
 
 impl CallablePolicies {
-    /// `callable`, called with the info dict when `with_info`.
-    pub fn new(callable: Py<PyAny>, with_info: bool) -> Self {
+    /// `policy`: a callable, called with the info dict when `with_info`, or a
+    /// [`SubmissionPolicy`].
+    pub fn new(py: Python<'_>, policy: Py<PyAny>, with_info: bool) -> Self {
         Self {
-            callable,
-            with_info,
+            calls: Calls::of(policy.into_bound(py), with_info),
             errors: ErrorSlot::default(),
         }
     }
 
     /// A policy for an environment with `spec`.
     pub fn for_spec(&self, py: Python<'_>, spec: &EnvSpec) -> PyResult<PyPolicy> {
-        PyPolicy::new(
-            py,
-            self.callable.clone_ref(py),
-            self.with_info,
-            spec,
-            self.errors.clone(),
-        )
+        PyPolicy::new(py, self.calls.clone_ref(py), spec, self.errors.clone())
     }
 }
 
@@ -240,7 +351,11 @@ impl PolicySource for LoaderPolicies<'_> {
             let pair = pair.cast::<PyTuple>()?;
             let callable: Py<PyAny> = pair.get_item(0)?.unbind();
             let with_info: bool = pair.get_item(1)?.extract()?;
-            PyPolicy::new(py, callable, with_info, spec, self.errors.clone())
+            let calls = Calls::Callable {
+                callable,
+                with_info,
+            };
+            PyPolicy::new(py, calls, spec, self.errors.clone())
         });
         loaded.map(|p| Box::new(p) as Box<dyn Policy>).map_err(|e| {
             keep(&self.errors, PolicyFailure::Raised(e));
