@@ -4,8 +4,11 @@ use std::path::{Path, PathBuf};
 
 use a2perf_core::{CancelToken, Registry};
 
+use crate::error::io_err;
 use crate::isolate::{ChildTask, Isolation};
+use crate::plan::DatasetSource;
 use crate::report::{Report, ReportOptions};
+use crate::run_dir::{CHECKPOINT_DIR, DATASET_REQUEST_FILE, POLICY_FILE};
 use crate::train::{MeterFactory, RunReport, TrainOptions, TrainSummary, no_meters};
 use crate::{
     ExperimentPlan, GENERALIZATION_FILE, GeneralizationResults, INFERENCE_FILE, InferOptions,
@@ -129,7 +132,13 @@ pub fn collect_dataset(
             .is_complete()
             .unwrap_or(false)
     });
-    if !(complete && source.samples.is_file()) {
+    let request = dataset_request(&source)?;
+    let request_file = source.out.join(DATASET_REQUEST_FILE);
+    // A dataset whose recorded request matches (same step, same source checkpoints) is reused:
+    // collection is seeded, so collecting it again would write the same samples.
+    let recorded = std::fs::read(&request_file).ok();
+    let same_request = recorded.as_deref() == Some(request.as_slice());
+    if !(source.samples.is_file() && (complete || same_request)) {
         let level = source.step.level()?;
         let mut opts = source.step.collect_options()?;
         opts.show_progress = show_progress;
@@ -150,8 +159,36 @@ pub fn collect_dataset(
                 level.name()
             )));
         }
+        a2perf_core::write_atomic(&request_file, &request).map_err(io_err(&request_file))?;
     }
     attach_dataset(plan)
+}
+
+/// The request a dataset step collects for, as bytes: the step's settings and, per source run,
+/// the sha256 of its final policy and of every checkpoint it kept.
+fn dataset_request(source: &DatasetSource) -> Result<Vec<u8>> {
+    let mut runs = Vec::with_capacity(source.runs.len());
+    for run in &source.runs {
+        let mut files = vec![run.join(POLICY_FILE)];
+        if let Ok(entries) = std::fs::read_dir(run.join(CHECKPOINT_DIR)) {
+            let mut kept: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
+            kept.sort();
+            files.extend(kept);
+        }
+        let mut hashes = serde_json::Map::new();
+        for f in files.iter().filter(|f| f.is_file()) {
+            let bytes = std::fs::read(f).map_err(io_err(f))?;
+            let name = f
+                .strip_prefix(run)
+                .unwrap_or(f)
+                .to_string_lossy()
+                .into_owned();
+            hashes.insert(name, crate::bundle::sha256_hex(&bytes).into());
+        }
+        runs.push(serde_json::json!({ "run": run, "sha256": hashes }));
+    }
+    let request = serde_json::json!({ "step": source.step, "runs": runs });
+    serde_json::to_vec_pretty(&request).map_err(|e| PipelineError::Invalid(e.to_string()))
 }
 
 /// Records in `plan` the provenance of the dataset its suite collected for it (nothing for a

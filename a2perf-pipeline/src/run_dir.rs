@@ -80,6 +80,9 @@ pub const SUBMISSION_FILES_DIR: &str = "submission/files";
 pub const COLLECT_DIR: &str = "collect";
 /// `collect/evaluation.json`: every checkpoint's evaluation.
 pub const EVALUATION_FILE: &str = "evaluation.json";
+/// `<experiment>/datasets/request.json`: what a suite's dataset step collected from (its step and
+/// the sha256 of every source checkpoint), so that a rerun with the same request reuses it.
+pub const DATASET_REQUEST_FILE: &str = "request.json";
 /// `train.lock`: the training lock (see [`run_lock`](crate::run_lock)).
 pub use crate::error::TRAIN_LOCK_FILE;
 /// `operative_config.ron`.

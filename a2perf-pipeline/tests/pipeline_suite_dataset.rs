@@ -151,15 +151,28 @@ fn a_dataset_step_collects_from_the_suites_runs_and_trains_on_it() {
         before
     );
 
-    // An unfinished offline run gets its dataset again, identical (collection is seeded).
+    // An unfinished offline run finds its dataset: the recorded request (the step and the
+    // sources' checkpoints) matches, so it is not collected again.
     let samples_before = std::fs::read(&source.samples).unwrap();
+    let request = source.out.join("request.json");
+    assert!(request.is_file(), "the dataset step records its request");
     std::fs::remove_dir_all(offline.run_dir(1)).unwrap();
     run_experiments(&reg, &loaded.plans, &opts, &mut |_| {}).unwrap();
-    assert_eq!(std::fs::read(&source.samples).unwrap(), samples_before);
+    let modified = |p: &Path| std::fs::metadata(p).unwrap().modified().unwrap();
+    assert_eq!(modified(&source.samples), stamp);
     assert_eq!(
         std::fs::read(offline.run_dir(0).join("policy.ckpt")).unwrap(),
         before
     );
+
+    // A request that no longer matches (here: edited) collects the dataset again, identical
+    // (collection is seeded).
+    std::fs::write(&request, b"{}").unwrap();
+    std::fs::remove_dir_all(offline.run_dir(1)).unwrap();
+    run_experiments(&reg, &loaded.plans, &opts, &mut |_| {}).unwrap();
+    assert_ne!(modified(&source.samples), stamp);
+    assert_eq!(std::fs::read(&source.samples).unwrap(), samples_before);
+    assert_ne!(std::fs::read(&request).unwrap(), b"{}");
 }
 
 #[test]
