@@ -314,43 +314,42 @@ pub fn run_experiments(
         show_progress: opts.show_progress,
         ..Default::default()
     };
-    for dir in &runs {
-        if cancel.is_cancelled() {
-            return Err(PipelineError::Cancelled);
+    // In this process the meters measure the whole process, so runs infer one at a time;
+    // under `--isolate` each run infers in a child of its own, so `--jobs` children run at once
+    // and every run's figures stay its own.
+    let workers = match &opts.isolation {
+        Isolation::InProcess => 1,
+        Isolation::Children(_) => resolve_jobs(opts.jobs),
+    };
+    let todo: Vec<&PathBuf> = runs
+        .iter()
+        .filter(|d| !d.join(INFERENCE_FILE).is_file())
+        .collect();
+    let inferred = pooled(&todo, workers, cancel, |dir| match &opts.isolation {
+        Isolation::InProcess => crate::infer_run(registry, dir, &infer_opts),
+        Isolation::Children(command) => {
+            crate::isolate::phase_in_child(command, ChildTask::Infer { run: dir }, cancel)?;
+            read_result::<InferenceResults>(&dir.join(INFERENCE_FILE))
         }
-        if dir.join(INFERENCE_FILE).is_file() {
-            continue;
-        }
-        let r = match &opts.isolation {
-            Isolation::InProcess => crate::infer_run(registry, dir, &infer_opts)?,
-            Isolation::Children(command) => {
-                crate::isolate::phase_in_child(command, ChildTask::Infer { run: dir }, cancel)?;
-                read_result::<InferenceResults>(&dir.join(INFERENCE_FILE))?
-            }
-        };
-        on_event(RunEvent::Inferred(dir, &r));
+    })?;
+    for (dir, r) in todo.iter().zip(&inferred) {
+        on_event(RunEvent::Inferred(dir, r));
     }
 
     on_event(RunEvent::Phase("generalize"));
-    for dir in &runs {
-        if cancel.is_cancelled() {
-            return Err(PipelineError::Cancelled);
+    let todo: Vec<&PathBuf> = runs
+        .iter()
+        .filter(|d| !d.join(GENERALIZATION_FILE).is_file())
+        .collect();
+    let generalized = pooled(&todo, workers, cancel, |dir| match &opts.isolation {
+        Isolation::InProcess => crate::generalize_run(registry, dir, None, opts.show_progress),
+        Isolation::Children(command) => {
+            crate::isolate::phase_in_child(command, ChildTask::Generalize { run: dir }, cancel)?;
+            read_result::<GeneralizationResults>(&dir.join(GENERALIZATION_FILE))
         }
-        if dir.join(GENERALIZATION_FILE).is_file() {
-            continue;
-        }
-        let r = match &opts.isolation {
-            Isolation::InProcess => crate::generalize_run(registry, dir, None, opts.show_progress)?,
-            Isolation::Children(command) => {
-                crate::isolate::phase_in_child(
-                    command,
-                    ChildTask::Generalize { run: dir },
-                    cancel,
-                )?;
-                read_result::<GeneralizationResults>(&dir.join(GENERALIZATION_FILE))?
-            }
-        };
-        on_event(RunEvent::Generalized(dir, &r));
+    })?;
+    for (dir, r) in todo.iter().zip(&generalized) {
+        on_event(RunEvent::Generalized(dir, r));
     }
 
     on_event(RunEvent::Phase("report"));
@@ -365,6 +364,55 @@ pub fn run_experiments(
     let report = crate::report::write_report(&experiments, &out, &report_opts)?;
     on_event(RunEvent::Reported(&out, &report));
     Ok(out)
+}
+
+/// Worker threads for `jobs` (0 = one per logical CPU).
+fn resolve_jobs(jobs: usize) -> usize {
+    match jobs {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        n => n,
+    }
+}
+
+/// `phase` of every run of `dirs`, on up to `workers` threads, results in the order of `dirs`.
+/// Every run is attempted (until a cancel); the first error in that order is returned, so that
+/// one failing run does not lose the results of the others already written.
+fn pooled<T: Send>(
+    dirs: &[&PathBuf],
+    workers: usize,
+    cancel: &CancelToken,
+    phase: impl Fn(&Path) -> Result<T> + Sync,
+) -> Result<Vec<T>> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let slots: Vec<std::sync::Mutex<Option<Result<T>>>> =
+        dirs.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..workers.clamp(1, dirs.len().max(1)) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                    let Some(dir) = dirs.get(i) else { break };
+                    let r = if cancel.is_cancelled() {
+                        Err(PipelineError::Cancelled)
+                    } else {
+                        phase(dir)
+                    };
+                    if let Ok(mut slot) = slots[i].lock() {
+                        *slot = Some(r);
+                    }
+                }
+            });
+        }
+    });
+    slots
+        .into_iter()
+        .map(|s| {
+            s.into_inner()
+                .ok()
+                .flatten()
+                .unwrap_or_else(|| Err(PipelineError::Invalid("a worker thread panicked".into())))
+        })
+        .collect()
 }
 
 /// A results file a child process wrote.
