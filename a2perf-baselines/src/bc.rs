@@ -223,7 +223,11 @@ impl Algorithm for Bc {
             run.restore(bytes, &mut policy)?;
         }
         loop {
+            let learn = std::time::Instant::now();
             run.step(&mut policy)?;
+            let seconds = learn.elapsed().as_secs_f64();
+            ctx.time_split_mut()
+                .add(a2perf_core::TimePart::Learn, seconds);
             let save = |p: &NetPolicy| Ok(run.save_state(p));
             if ctx.progress_resumable(run.samples, &mut policy, save)? == Control::Stop {
                 break;

@@ -1,7 +1,7 @@
 //! Pieces shared by the algorithms: hyperparameter reading, environment setup, network choice.
 
 use a2perf_core::{
-    Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError, Space,
+    Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError, Space, TimeSplit,
     TrainingContext, Value, VecEnv, VecStep,
 };
 
@@ -259,8 +259,8 @@ pub(crate) trait OnlineRun {
     ) -> Result<(), RunError>;
     /// Resets every environment and stores the first observations (a fresh start).
     fn reset(&mut self) -> Result<(), RunError>;
-    /// One iteration of the loop.
-    fn iterate(&mut self, policy: &mut NetPolicy) -> Result<(), RunError>;
+    /// One iteration of the loop, its acting, stepping and learning timed into `split`.
+    fn iterate(&mut self, policy: &mut NetPolicy, split: &mut TimeSplit) -> Result<(), RunError>;
     /// Environment steps taken so far.
     fn env_steps(&self) -> u64;
     /// Everything the run needs to continue exactly, besides what the context keeps.
@@ -282,7 +282,7 @@ pub(crate) fn drive(
         None => run.reset()?,
     }
     loop {
-        run.iterate(&mut policy)?;
+        run.iterate(&mut policy, ctx.time_split_mut())?;
         let save = |p: &NetPolicy| Ok(run.save_state(p));
         if ctx.progress_resumable(run.env_steps(), &mut policy, save)? == Control::Stop {
             break;

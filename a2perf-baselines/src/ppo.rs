@@ -13,6 +13,8 @@ use a2perf_core::{
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
+use a2perf_core::{TimePart, TimeSplit};
+
 use crate::common::*;
 use crate::model::{DiscreteNet, GaussianArch, NetOptions};
 use crate::nn::dist::{gaussian, masked};
@@ -436,11 +438,15 @@ impl PpoRun {
     /// `num_steps` steps of every environment into the rollout. Rewards are scaled when
     /// configured; a truncated (not terminated) episode's reward takes the discounted value of
     /// its final observation.
-    fn collect_rollout(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
+    fn collect_rollout(
+        &mut self,
+        policy: &mut NetPolicy,
+        split: &mut TimeSplit,
+    ) -> Result<(), RunError> {
         let n_env = self.n_env;
         for t in 0..self.cfg.num_steps {
-            self.choose_actions(policy, t)?;
-            let outs = self.venv.step_all(&self.actions)?;
+            split.time(TimePart::Act, || self.choose_actions(policy, t))?;
+            let outs = split.time(TimePart::Env, || self.venv.step_all(&self.actions))?;
             self.finals.clear();
             self.final_rows.clear();
             for (i, out) in outs.iter().enumerate() {
@@ -764,11 +770,12 @@ impl OnlineRun for PpoRun {
         write_observations(&mut self.raw, self.venv.reset_all()?)
     }
 
-    fn iterate(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
-        let run = self;
-        run.collect_rollout(policy)?;
-        run.compute_advantages(policy);
-        run.optimise(policy);
+    fn iterate(&mut self, policy: &mut NetPolicy, split: &mut TimeSplit) -> Result<(), RunError> {
+        self.collect_rollout(policy, split)?;
+        split.time(TimePart::Learn, || {
+            self.compute_advantages(policy);
+            self.optimise(policy);
+        });
         check_finite("PPO parameters", &policy.params)
     }
 

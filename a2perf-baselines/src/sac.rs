@@ -8,6 +8,8 @@ use a2perf_core::{
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
+use a2perf_core::{TimePart, TimeSplit};
+
 use crate::common::*;
 use crate::model::SquashedArch;
 use crate::nn::dist::tanh_gaussian;
@@ -743,11 +745,10 @@ impl OnlineRun for SacRun {
         write_observations(&mut self.cur, self.venv.reset_all()?)
     }
 
-    fn iterate(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
-        let run = self;
-        run.choose_actions(policy);
-        run.step_envs()?;
-        run.learn(policy)
+    fn iterate(&mut self, policy: &mut NetPolicy, split: &mut TimeSplit) -> Result<(), RunError> {
+        split.time(TimePart::Act, || self.choose_actions(policy));
+        split.time(TimePart::Env, || self.step_envs())?;
+        split.time(TimePart::Learn, || self.learn(policy))
     }
 
     fn env_steps(&self) -> u64 {

@@ -426,3 +426,37 @@ fn random_policy_is_worse_than_trained_bandit_policy() {
     let s = total / 400.0;
     assert!((0.15..0.35).contains(&s), "{s}");
 }
+
+/// Every online algorithm times its acting, stepping and learning into the context's split
+/// (issue 38), and the parts stay within the run's wall clock.
+#[test]
+fn online_algorithms_time_their_parts() {
+    use a2perf_core::{CancelToken, DiscardCheckpoints, EnvError, TrainingContext};
+    for name in ["ppo", "ddqn"] {
+        let mut alg = make_alg(
+            name,
+            &[
+                ("hidden_sizes", ints(&[16])),
+                ("learning_starts", Value::Int(16)),
+            ]
+            .into_iter()
+            .filter(|(k, _)| name == "ddqn" || *k != "learning_starts")
+            .collect::<Vec<_>>(),
+        );
+        let factory =
+            |_i: usize| -> Result<Box<dyn Env>, EnvError> { Ok(Box::new(MaskedBandit::new())) };
+        let mut sink = DiscardCheckpoints;
+        let mut ctx =
+            TrainingContext::new(&factory, 0, settings(512, 2), &mut sink, CancelToken::new());
+        let started = std::time::Instant::now();
+        alg.train(&mut ctx).expect("training failed");
+        let wall = started.elapsed().as_secs_f64();
+        let t = *ctx.time_split();
+        for (part, x) in t.parts() {
+            if part != "io" {
+                assert!(x > 0.0, "{name}: {part} not timed: {t:?}");
+            }
+        }
+        assert!(t.total() <= wall, "{name}: {t:?} over {wall} s");
+    }
+}

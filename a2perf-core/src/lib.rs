@@ -54,6 +54,7 @@ pub mod rng;
 pub mod rollout;
 pub mod space;
 pub mod tensor;
+pub mod time_split;
 pub mod training;
 pub mod value;
 pub mod vec_env;
@@ -79,6 +80,7 @@ pub use rng::{RngState, RngStream};
 pub use rollout::{Episode, Transition, rollout};
 pub use space::{Action, Observation, Space};
 pub use tensor::{DType, Tensor, TensorData};
+pub use time_split::{TimePart, TimeSplit};
 pub use training::{
     Algorithm, CheckpointSink, Control, DirectoryCheckpoints, DiscardCheckpoints, EnvFactory,
     TrainingContext, TrainingSettings,

@@ -15,6 +15,7 @@ use crate::policy::{ActMode, Policy};
 use crate::resume::{ResumeDir, ResumePoint, ResumeWrite, TrainingProgress};
 use crate::rng::RngStream;
 use crate::rollout::rollout;
+use crate::time_split::{TimePart, TimeSplit};
 
 /// Receives checkpoints (and, when it keeps them, resume points) during training.
 pub trait CheckpointSink: Send {
@@ -237,6 +238,7 @@ pub struct TrainingContext<'a> {
     resumed_from: Option<u64>,
     resume_writes: Vec<ResumeWrite>,
     warnings: Vec<String>,
+    split: TimeSplit,
 }
 
 impl<'a> TrainingContext<'a> {
@@ -267,6 +269,7 @@ impl<'a> TrainingContext<'a> {
             resumed_from: None,
             resume_writes: Vec::new(),
             warnings: Vec::new(),
+            split: TimeSplit::default(),
         }
     }
 
@@ -301,6 +304,16 @@ impl<'a> TrainingContext<'a> {
     /// Resume points written so far: their size and how long each took.
     pub fn resume_writes(&self) -> &[ResumeWrite] {
         &self.resume_writes
+    }
+
+    /// Where the run's time went so far (see [`TimeSplit`]).
+    pub fn time_split(&self) -> &TimeSplit {
+        &self.split
+    }
+
+    /// The split, for an algorithm to time its own parts (acting, stepping, learning) into.
+    pub fn time_split_mut(&mut self) -> &mut TimeSplit {
+        &mut self.split
     }
 
     /// Records a warning for the front end (the library never prints).
@@ -356,6 +369,14 @@ impl<'a> TrainingContext<'a> {
     /// Mean and std of greedy returns over `settings.eval_episodes` episodes. The evaluation seeds
     /// are the same at every evaluation (common random numbers), so curve points are comparable.
     pub fn evaluate(&mut self, policy: &mut dyn Policy) -> Result<(f64, f64), RunError> {
+        let t = Instant::now();
+        let r = self.evaluate_untimed(policy);
+        self.split
+            .add(TimePart::Evaluation, t.elapsed().as_secs_f64());
+        r
+    }
+
+    fn evaluate_untimed(&mut self, policy: &mut dyn Policy) -> Result<(f64, f64), RunError> {
         if self.eval_env.is_none() {
             self.eval_env = Some((self.env_factory)(usize::MAX)?);
         }
@@ -436,10 +457,12 @@ impl<'a> TrainingContext<'a> {
                 state,
             };
             let bytes = self.checkpoints.save_resume(&point)?;
+            let seconds = t.elapsed().as_secs_f64();
+            self.split.add(TimePart::Io, seconds);
             self.resume_writes.push(ResumeWrite {
                 env_steps,
                 bytes,
-                seconds: t.elapsed().as_secs_f64(),
+                seconds,
             });
         }
         if interrupt {
@@ -507,8 +530,10 @@ impl<'a> TrainingContext<'a> {
     }
 
     fn save_checkpoint(&mut self, env_steps: u64, policy: &dyn Policy) -> Result<(), RunError> {
+        let t = Instant::now();
         let ckpt = policy.checkpoint()?;
         self.checkpoints.save(env_steps, &ckpt)?;
+        self.split.add(TimePart::Io, t.elapsed().as_secs_f64());
         self.last_checkpoint = Some(env_steps);
         Ok(())
     }

@@ -352,6 +352,7 @@ impl ExternalRun {
                 system: None,
                 resume_points: Vec::new(),
                 warnings: warnings.clone(),
+                time_split: None,
             }],
         };
         write_json_atomic(&run.file(TRAIN_SEGMENTS_FILE), &segments)?;

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use a2perf_core::{
     Checkpoint, Env, EnvSpec, LearningCurve, Policy, Registry, ResumeDir, ResumePoint, ResumeWrite,
-    RunDir, TrainingSettings, Value, write_atomic, write_json_atomic,
+    RunDir, TimeSplit, TrainingSettings, Value, write_atomic, write_json_atomic,
 };
 use serde::{Deserialize, Serialize};
 
@@ -456,6 +456,10 @@ pub struct TrainSegment {
     /// Warnings of the segment.
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// Where the segment's wall time went (environment steps, acting, learning, evaluation,
+    /// checkpoint I/O); `None` when it was killed, or written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_split: Option<TimeSplit>,
 }
 
 /// `train_segments.json`: every segment of a run, oldest first.

@@ -324,6 +324,7 @@ fn begin_segment(
         system: None,
         resume_points: Vec::new(),
         warnings: warnings.to_vec(),
+        time_split: None,
     });
     write_json_atomic(&run.file(TRAIN_SEGMENTS_FILE), segments)?;
     Ok(())
@@ -336,6 +337,7 @@ struct Segment {
     resumed_from: Option<u64>,
     warnings: Vec<String>,
     writes: Vec<a2perf_core::ResumeWrite>,
+    split: a2perf_core::TimeSplit,
     system: PhaseSystem,
 }
 
@@ -354,7 +356,7 @@ fn train_segment(
     let mut sink =
         DirectoryCheckpoints::new(run.file(CHECKPOINT_DIR)).with_resume_dir(run.file(RESUME_DIR));
     let meters = (opts.meters)(Phase::Train, &dir, &plan.metrics);
-    let ((result, curve, resumed_from, warnings, writes), system) = measured(meters, || {
+    let ((result, curve, resumed_from, warnings, writes, split), system) = measured(meters, || {
         let mut ctx = TrainingContext::new(
             factory,
             job.seed,
@@ -369,7 +371,8 @@ fn train_segment(
         let resumed_from = ctx.resumed_from();
         let warnings = ctx.warnings().to_vec();
         let writes = ctx.resume_writes().to_vec();
-        (r, ctx.take_curve(), resumed_from, warnings, writes)
+        let split = *ctx.time_split();
+        (r, ctx.take_curve(), resumed_from, warnings, writes, split)
     });
     Ok(Segment {
         result,
@@ -377,6 +380,7 @@ fn train_segment(
         resumed_from,
         warnings,
         writes,
+        split,
         system,
     })
 }
@@ -403,6 +407,7 @@ fn end_segment(
         seg.outcome = outcome;
         seg.system = Some(segment.system.clone());
         seg.resume_points = segment.writes.clone();
+        seg.time_split = Some(segment.split);
         seg.warnings = warnings.to_vec();
     }
     write_json_atomic(&run.file(TRAIN_SEGMENTS_FILE), segments)?;

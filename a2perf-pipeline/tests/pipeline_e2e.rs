@@ -209,6 +209,15 @@ fn train_infer_generalize_collect_report() {
     assert!(tex.contains("\\toprule") && tex.contains("\\textbf{TOY\\_BC}"));
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("Dispersion across runs") && md.contains("RANDOM_SEARCH"));
+    // Where training time went: every run records its split; evaluation always runs, the
+    // offline learner times its learning, and no part claims more than the wall clock.
+    for g in [on, off] {
+        let t = g.time_split.expect("every run recorded its time split");
+        assert!(t.parts.evaluation_s > 0.0, "{}: {t:?}", g.algorithm);
+        assert!(t.parts.parts().iter().all(|&(_, x)| x >= 0.0));
+        assert!(t.parts.total() <= t.wall_s * 1.01 + 0.01, "{t:?}");
+    }
+    assert!(md.contains("## Where training time went"));
     let radar = std::fs::read_to_string(out.join("plots/radar_Corridor-v0.svg")).unwrap();
     assert_eq!(
         radar.matches("<polygon").count(),

@@ -14,7 +14,7 @@ use crate::spec::GeneralizationSuite;
 use crate::train::PhaseSystem;
 use crate::{
     CURVE_JSON, GENERALIZATION_FILE, INFERENCE_FILE, LoadedRun, PipelineError, Result,
-    SYSTEM_INFO_FILE, SystemInfo, TRAIN_SYSTEM_FILE, find_runs, io_err,
+    SYSTEM_INFO_FILE, SystemInfo, TRAIN_SEGMENTS_FILE, TRAIN_SYSTEM_FILE, find_runs, io_err,
 };
 
 /// Everything loaded from one complete run directory.
@@ -32,6 +32,9 @@ pub struct RunData {
     pub generalization: Option<GeneralizationResults>,
     /// Machine it was trained on.
     pub system_info: Option<SystemInfo>,
+    /// Where its training's wall time went, over every segment; `None` when a segment did not
+    /// record it (killed, or trained before it was recorded).
+    pub time_split: Option<a2perf_core::TimeSplit>,
 }
 
 fn read_opt<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<Option<T>> {
@@ -53,6 +56,14 @@ impl RunData {
             inference: read_opt(&dir.join(INFERENCE_FILE))?,
             generalization: read_opt(&dir.join(GENERALIZATION_FILE))?,
             system_info: read_opt(&dir.join(SYSTEM_INFO_FILE))?,
+            time_split: read_opt::<crate::run_dir::TrainSegments>(&dir.join(TRAIN_SEGMENTS_FILE))?
+                .and_then(|s| {
+                    s.segments
+                        .iter()
+                        .try_fold(a2perf_core::TimeSplit::default(), |sum, seg| {
+                            seg.time_split.map(|t| sum.plus(&t))
+                        })
+                }),
             run,
         })
     }

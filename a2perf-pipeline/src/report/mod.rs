@@ -34,8 +34,8 @@ pub mod svg;
 pub use load::{Group, RunData, SkippedRun, load_groups};
 pub use merge::merge_reports;
 pub use model::{
-    Category, GroupReport, ImprovementEntry, IqmEntry, MetricValue, ProfileUse, Report,
-    ReportOptions, SuiteUse, TableSettings,
+    Category, GroupReport, GroupTimeSplit, ImprovementEntry, IqmEntry, MetricValue, ProfileUse,
+    Report, ReportOptions, SuiteUse, TableSettings,
 };
 
 /// One page for several report directories (each `report.json` and `curves.csv`, e.g. the
@@ -194,5 +194,23 @@ fn group_report(group: &Group, opts: &ReportOptions) -> GroupReport {
         algorithm: group.algorithm.clone(),
         seeds: runs.iter().map(|r| r.run.record.seed).collect(),
         metrics,
+        time_split: group_time_split(runs),
     }
+}
+
+/// The group's training time split, summed over its runs: `None` unless every run recorded
+/// both its split and its training wall clock.
+fn group_time_split(runs: &[RunData]) -> Option<model::GroupTimeSplit> {
+    runs.iter().try_fold(
+        model::GroupTimeSplit {
+            wall_s: 0.0,
+            parts: a2perf_core::TimeSplit::default(),
+        },
+        |sum, r| {
+            Some(model::GroupTimeSplit {
+                wall_s: sum.wall_s + r.train_system.as_ref()?.wall_clock_s,
+                parts: sum.parts.plus(&r.time_split?),
+            })
+        },
+    )
 }

@@ -4,7 +4,7 @@
 //! record what the tables show. Every other part of the report reads or writes these; this file
 //! imports none of them.
 
-use a2perf_core::{MeterReport, Provenance};
+use a2perf_core::{MeterReport, Provenance, TimeSplit};
 use serde::{Deserialize, Serialize};
 
 use crate::spec::{ProfileRecord, SuiteSource};
@@ -116,6 +116,19 @@ pub struct GroupReport {
     pub seeds: Vec<u64>,
     /// The metrics, in table order.
     pub metrics: Vec<MetricValue>,
+    /// Where the group's training wall time went, summed over its runs (when every run
+    /// recorded it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_split: Option<GroupTimeSplit>,
+}
+
+/// The training wall time of a group's runs, and how much of it each part claimed.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GroupTimeSplit {
+    /// Training wall seconds, summed over the runs.
+    pub wall_s: f64,
+    /// The parts' seconds, summed over the runs.
+    pub parts: TimeSplit,
 }
 
 impl GroupReport {

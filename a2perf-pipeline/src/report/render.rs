@@ -7,8 +7,8 @@ use a2perf_core::LearningCurve;
 
 pub use super::format::{format_ratio, format_value};
 use super::model::{
-    Category, FindingCheck, GroupReport, MetricValue, PaperCell, PaperComparison, RATIO_METRICS,
-    Report, TableSettings, Verdict,
+    Category, FindingCheck, GroupReport, GroupTimeSplit, MetricValue, PaperCell, PaperComparison,
+    RATIO_METRICS, Report, TableSettings, Verdict,
 };
 
 /// Text from the results (names, notes, reasons) made inert in Markdown: HTML's `&`, `<` and
@@ -384,6 +384,7 @@ pub fn markdown(report: &Report) -> String {
         findings_md(&mut s, &report.findings);
     }
     comparisons_md(&mut s, report);
+    time_split_md(&mut s, report);
     if !report.skipped_runs.is_empty() {
         let _ = writeln!(s, "## Runs left out\n");
         for (dir, why) in &report.skipped_runs {
@@ -391,6 +392,50 @@ pub fn markdown(report: &Report) -> String {
         }
     }
     s
+}
+
+/// "Where training time went": per group, its training wall time and each part's share of it
+/// (only for groups whose runs recorded it; nothing for a report without any).
+fn time_split_md(s: &mut String, report: &Report) {
+    let rows: Vec<(&GroupReport, &GroupTimeSplit)> = report
+        .groups
+        .iter()
+        .filter_map(|g| g.time_split.as_ref().map(|t| (g, t)))
+        .collect();
+    if rows.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "## Where training time went\n\nTraining wall time summed over each group's seeds, and \
+         the share of it each part took (timed by the training loop; `other` is what no part \
+         claims: setup, batching outside learning, bookkeeping).\n"
+    );
+    let _ = writeln!(
+        s,
+        "| task | algorithm | wall (h) | env | act | learn | evaluation | io | other |\n\
+         |---|---|---|---|---|---|---|---|---|"
+    );
+    for (g, t) in rows {
+        let share = |x: f64| {
+            if t.wall_s > 0.0 {
+                format!("{:.0}%", 100.0 * x / t.wall_s)
+            } else {
+                "—".to_string()
+            }
+        };
+        let parts: Vec<String> = t.parts.parts().iter().map(|&(_, x)| share(x)).collect();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.3} | {} | {} |",
+            md_text(&g.task),
+            md_text(&g.algorithm),
+            t.wall_s / 3600.0,
+            parts.join(" | "),
+            share((t.wall_s - t.parts.total()).max(0.0))
+        );
+    }
+    let _ = writeln!(s);
 }
 
 /// The table of one task in Markdown: settings, our columns (and the paper's), the ratio
