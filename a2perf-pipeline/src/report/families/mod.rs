@@ -35,6 +35,7 @@ pub(super) fn group_report(group: &Group, opts: &ReportOptions) -> GroupReport {
         algorithm: group.algorithm.clone(),
         seeds: runs.iter().map(|r| r.run.record.seed).collect(),
         metrics,
+        verified: false,
     }
 }
 
