@@ -5,6 +5,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod bundle_cmd;
 mod circuit_cmd;
 mod config_cmd;
 mod list;
@@ -58,6 +59,12 @@ enum Command {
     /// Train, infer, generalize and report an A2Perf participant folder (train.py,
     /// inference.py, requirements.txt) under the harness's meters, in a venv of its own.
     Submit(submit_cmd::SubmitArgs),
+    /// Pack complete runs into one file that carries their results and the proof behind them
+    /// (every evaluated episode's seed and actions); see docs/bundles.md.
+    Bundle(bundle_cmd::BundleArgs),
+    /// Check a bundle: its manifest, a replay of every logged episode, the stated means, and
+    /// for built-in algorithms a re-run of the checkpoint. Exit code 1 when a check fails.
+    Verify(bundle_cmd::VerifyArgs),
 }
 
 /// The exit codes of `train` and `run`, shown by their `--help`.
@@ -145,5 +152,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Run(args) => pipeline_cmd::run(&registry, &args),
         Command::Collect(args) => pipeline_cmd::collect(&registry, &args),
         Command::Submit(args) => submit_cmd::submit(&registry, &args),
+        Command::Bundle(args) => bundle_cmd::bundle(&registry, &args),
+        Command::Verify(args) => bundle_cmd::verify(&registry, &args),
     }
 }

@@ -100,7 +100,9 @@ pub struct GeneralizeArgs {
 /// Arguments of `a2perf report`.
 #[derive(Args, Debug)]
 pub struct ReportArgs {
-    /// Experiment directories (or run directories); their runs are merged.
+    /// Experiment directories, run directories or bundle files (`a2perf bundle`); their runs
+    /// are merged. Bundles are verified first (one that fails stops the report), and a group
+    /// whose runs all come from verified bundles is marked verified.
     #[arg(required = true)]
     pub dirs: Vec<PathBuf>,
     /// Output directory (default: `report/` inside the first directory).
@@ -121,6 +123,10 @@ pub struct ReportArgs {
     /// computed again over the merged groups). Needs `-o`, which must not be one of DIRS.
     #[arg(long, requires = "output", conflicts_with_all = ["paper", "bootstrap_reps"])]
     pub from_reports: bool,
+    /// Only the verified groups in leaderboard.json (those whose runs all come from bundles
+    /// given as inputs, which verified).
+    #[arg(long, conflicts_with = "from_reports")]
+    pub verified_only: bool,
 }
 
 /// Arguments of `a2perf run`.
@@ -542,6 +548,7 @@ pub(crate) fn write_report(
     out: &Path,
     reps: Option<usize>,
     paper: Option<&pipeline::report::paper::PaperTables>,
+    verified: &pipeline::report::VerifiedRuns,
 ) -> Result<()> {
     let opts = ReportOptions {
         bootstrap_reps: match reps {
@@ -550,7 +557,7 @@ pub(crate) fn write_report(
         },
         seed: 0,
     };
-    let report = pipeline::report::write_report_with_paper(dirs, out, &opts, paper)?;
+    let report = pipeline::report::write_report_verified(dirs, out, &opts, paper, verified)?;
     print_report(out, &report);
     if paper.is_some() {
         println!(
@@ -596,6 +603,12 @@ pub fn report(args: &ReportArgs) -> Result<()> {
         let out = args.output.as_deref().expect("clap requires -o");
         return page_from_reports(&args.dirs, out);
     }
+    if args.output.is_none() && args.dirs[0].is_file() {
+        anyhow::bail!(
+            "{} is a bundle: give the report's directory with -o",
+            args.dirs[0].display()
+        );
+    }
     let out = args
         .output
         .clone()
@@ -606,7 +619,14 @@ pub fn report(args: &ReportArgs) -> Result<()> {
         .as_deref()
         .map(pipeline::report::paper::PaperTables::load)
         .transpose()?;
-    write_report(&args.dirs, &out, args.bootstrap_reps, tables.as_ref())
+    // Verified bundles' runs live in this directory until the report is written.
+    let extracted = tempfile::tempdir().context("creating a temporary directory")?;
+    let (dirs, runs) = crate::bundle_cmd::open_bundles(&args.dirs, extracted.path())?;
+    let verified = pipeline::report::VerifiedRuns {
+        runs,
+        only: args.verified_only,
+    };
+    write_report(&dirs, &out, args.bootstrap_reps, tables.as_ref(), &verified)
 }
 
 /// `a2perf run`: train → infer → generalize → report.

@@ -424,7 +424,7 @@ pub fn submit(registry: &Registry, args: &SubmitArgs) -> Result<()> {
             .and_then(|r| r.is_complete())
             .unwrap_or(false)
     }) {
-        crate::pipeline_cmd::write_report(&dirs, &out, None, None)?;
+        crate::pipeline_cmd::write_report(&dirs, &out, None, None, &Default::default())?;
     }
     if !failures.is_empty() {
         bail!(

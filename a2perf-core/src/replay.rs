@@ -304,6 +304,98 @@ pub fn replay(env: &mut dyn Env, log: &EpisodeLog) -> Result<Replayed, ReplayErr
     })
 }
 
+/// An environment that logs every episode run through it: the reset seed, each action and its
+/// reward. Rollout code is unchanged by it (it is just another [`Env`]), and recording costs a
+/// push into a `Vec` per step, so a benchmark's timed rollouts can keep their proof.
+///
+/// ```
+/// # use a2perf_core::{Action, Env, EnvError, EnvSpec, Observation, Space, Step};
+/// use a2perf_core::replay::{Recorder, replay};
+/// # struct Counter { spec: EnvSpec, t: usize }
+/// # impl Env for Counter {
+/// #     fn spec(&self) -> &EnvSpec { &self.spec }
+/// #     fn reset_into(&mut self, _s: Option<u64>, obs: &mut Observation) -> Result<(), EnvError> {
+/// #         self.t = 0; *obs = Observation::flat(vec![0.0]); Ok(()) }
+/// #     fn step_into(&mut self, a: &Action, out: &mut Step) -> Result<(), EnvError> {
+/// #         self.t += 1; out.reward = 0.5;
+/// #         out.terminated = self.t == 2; out.truncated = false; Ok(()) }
+/// # }
+/// # let spec = EnvSpec { id: "C-v0".into(), observation_space: Space::uniform_box(&[1], 0.0, 9.0),
+/// #     action_space: Space::Discrete { n: 2 }, max_episode_steps: None, metadata: Default::default() };
+/// let mut env = Counter { spec, t: 0 };
+/// let mut rec = Recorder::new(&mut env);
+/// rec.reset(Some(5)).unwrap();
+/// rec.step(&Action::Discrete(1)).unwrap();
+/// rec.step(&Action::Discrete(0)).unwrap();
+/// let logs = rec.into_logs();
+/// assert_eq!(logs[0].seed, 5);
+/// assert_eq!(logs[0].logged_return(), 1.0);
+/// assert_eq!(replay(&mut env, &logs[0]).unwrap().episode_return, 1.0);
+/// ```
+pub struct Recorder<'a> {
+    inner: &'a mut dyn Env,
+    logs: Vec<EpisodeLog>,
+}
+
+impl<'a> Recorder<'a> {
+    /// Wraps `inner`; nothing is logged until its first reset.
+    pub fn new(inner: &'a mut dyn Env) -> Self {
+        Self {
+            inner,
+            logs: Vec::new(),
+        }
+    }
+
+    /// The episodes logged so far, one per reset, in order.
+    pub fn logs(&self) -> &[EpisodeLog] {
+        &self.logs
+    }
+
+    /// The logged episodes.
+    pub fn into_logs(self) -> Vec<EpisodeLog> {
+        self.logs
+    }
+}
+
+impl Env for Recorder<'_> {
+    fn spec(&self) -> &crate::EnvSpec {
+        self.inner.spec()
+    }
+
+    /// A reset without a seed is logged with seed 0: benchmark rollouts always give one, and
+    /// a replay of such an episode fails at its first step unless the environment ignores it.
+    fn reset_into(
+        &mut self,
+        seed: Option<u64>,
+        obs: &mut crate::Observation,
+    ) -> Result<(), EnvError> {
+        self.inner.reset_into(seed, obs)?;
+        self.logs.push(EpisodeLog::new(seed.unwrap_or(0)));
+        Ok(())
+    }
+
+    fn step_into(&mut self, action: &Action, out: &mut Step) -> Result<(), EnvError> {
+        self.inner.step_into(action, out)?;
+        let Some(log) = self.logs.last_mut() else {
+            return Err(EnvError::Backend("stepped before the first reset".into()));
+        };
+        log.push(action, out.reward)
+            .map_err(|e| EnvError::Backend(format!("cannot log the action: {e}")))
+    }
+
+    fn close(&mut self) -> Result<(), EnvError> {
+        self.inner.close()
+    }
+
+    fn render_modes(&self) -> &'static [&'static str] {
+        self.inner.render_modes()
+    }
+
+    fn render(&mut self, mode: &str) -> Result<crate::render::Frame, EnvError> {
+        self.inner.render(mode)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

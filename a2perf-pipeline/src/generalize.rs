@@ -4,15 +4,54 @@
 
 use std::path::Path;
 
+use a2perf_core::replay::Recorder;
 use a2perf_core::{ActMode, Registry, RngStream, write_json_atomic};
 
 // The result file's model belongs to the run directory; `generalize::` still names it.
 use crate::error::{PipelineError, Result};
 use crate::progress;
 use crate::rollout::located_rollout;
-use crate::run_dir::{GENERALIZATION_FILE, LoadedRun, POLICY_FILE, PolicySource, RegistryPolicies};
+use crate::run_dir::{
+    GENERALIZATION_FILE, LoadedRun, POLICY_FILE, PolicySource, RegistryPolicies,
+    generalization_episodes_file, write_episode_logs,
+};
 pub use crate::run_dir::{GeneralizationResults, TaskResult};
 use crate::spec::{GeneralizationTask, SuiteSource};
+
+/// The reset seed of episode `index` on generalization task `task` of a run with `run_seed`
+/// (what `verify` checks the logged seeds against).
+///
+/// ```
+/// use a2perf_pipeline::generalize::generalization_episode_seed;
+/// assert_ne!(
+///     generalization_episode_seed(0, "a", 0),
+///     generalization_episode_seed(0, "b", 0)
+/// );
+/// ```
+pub fn generalization_episode_seed(run_seed: u64, task: &str, index: usize) -> u64 {
+    RngStream::new(run_seed, &format!("generalization/{task}"))
+        .derive_index(index as u64)
+        .next_u64()
+}
+
+/// The generalization suite of `run`: the one its `run.json` records, else the registry's for
+/// its domain (runs recorded before suites were configurable).
+pub fn generalization_suite(
+    registry: &Registry,
+    run: &LoadedRun,
+) -> (SuiteSource, Vec<GeneralizationTask>) {
+    match &run.record.generalization.suite {
+        Some(s) => (s.source, s.tasks.clone()),
+        None => (
+            SuiteSource::Registry,
+            registry
+                .generalization(&run.record.domain)
+                .iter()
+                .map(GeneralizationTask::from)
+                .collect(),
+        ),
+    }
+}
 
 /// Rolls the final policy of a complete run out on every task of its generalization suite and
 /// writes `generalization.json`. The suite is the one `run.json` records; a run recorded without
@@ -54,18 +93,7 @@ pub fn generalize_run_with(
             "generalization needs at least one episode per task".into(),
         ));
     }
-    let (source, suite): (SuiteSource, Vec<GeneralizationTask>) =
-        match &run.record.generalization.suite {
-            Some(s) => (s.source, s.tasks.clone()),
-            None => (
-                SuiteSource::Registry,
-                registry
-                    .generalization(&run.record.domain)
-                    .iter()
-                    .map(GeneralizationTask::from)
-                    .collect(),
-            ),
-        };
+    let (source, suite) = generalization_suite(registry, &run);
     if suite.is_empty() {
         return Err(PipelineError::Invalid(format!(
             "domain `{}` has no generalization suite registered (list one in the config's \
@@ -88,12 +116,12 @@ pub fn generalize_run_with(
             let mut env = registry.make_env(&task.env_id, &task.params)?;
             let spec = env.spec().clone();
             let mut policy = policies.policy(&run, &dir.join(POLICY_FILE), &spec)?;
-            let seeds = RngStream::new(run.record.seed, &format!("generalization/{}", task.name));
+            let mut recorder = Recorder::new(env.as_mut());
             let mut returns = Vec::with_capacity(episodes);
             for i in 0..episodes {
-                let seed = seeds.derive_index(i as u64).next_u64();
+                let seed = generalization_episode_seed(run.record.seed, &task.name, i);
                 let ep = located_rollout(
-                    env.as_mut(),
+                    &mut recorder,
                     policy.as_mut(),
                     seed,
                     ActMode::Greedy,
@@ -104,7 +132,9 @@ pub fn generalize_run_with(
                 returns.push(ep.episode_return);
                 bar.inc(1);
             }
+            let logs = recorder.into_logs();
             let _ = env.close();
+            write_episode_logs(dir, &generalization_episodes_file(&task.name), &logs)?;
             Ok(returns)
         })();
         match outcome {

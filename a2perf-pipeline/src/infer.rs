@@ -3,6 +3,7 @@
 use std::path::Path;
 use std::time::Instant;
 
+use a2perf_core::replay::Recorder;
 use a2perf_core::{
     ActMode, Env, Observation, Policy, Registry, RngStream, Space, Step, Tensor, write_atomic,
     write_json_atomic,
@@ -14,8 +15,8 @@ use crate::phase::{MeterFactory, Phase, measured, no_meters};
 use crate::progress;
 pub use crate::run_dir::InferenceResults;
 use crate::run_dir::{
-    INFERENCE_EMISSIONS_FILE, INFERENCE_FILE, LoadedRun, POLICY_FILE, PolicySource,
-    RegistryPolicies,
+    INFERENCE_EMISSIONS_FILE, INFERENCE_EPISODES_FILE, INFERENCE_FILE, LoadedRun, POLICY_FILE,
+    PolicySource, RegistryPolicies, write_episode_logs,
 };
 use crate::spec::ObservationSource;
 use crate::stats::Summary;
@@ -116,16 +117,17 @@ pub fn infer_run_with(
     let emissions = dir.join(INFERENCE_EMISSIONS_FILE);
     let emissions_before = std::fs::read(&emissions).ok();
 
-    let seeds = RngStream::new(run.record.seed, "inference/episodes");
     let bar = progress::bar(episodes as u64, "infer", opts.show_progress);
     let meters = (opts.meters)(Phase::Inference, dir, &run.record.metrics);
+    // Every episode's seed and actions are logged, so that `verify` can replay them.
+    let mut recorder = Recorder::new(env.as_mut());
     let (rollouts, system) = measured(meters, || -> Result<(Vec<f64>, Vec<usize>, Vec<f64>)> {
         let mut returns = Vec::with_capacity(episodes);
         let mut lengths = Vec::with_capacity(episodes);
         let mut times_ms = Vec::new();
         for i in 0..episodes {
-            let seed = seeds.derive_index(i as u64).next_u64();
-            let (ret, len) = timed_rollout(env.as_mut(), policy.as_mut(), seed, &mut times_ms)
+            let seed = inference_episode_seed(run.record.seed, i);
+            let (ret, len) = timed_rollout(&mut recorder, policy.as_mut(), seed, &mut times_ms)
                 .map_err(|(step, source)| PipelineError::Rollout {
                     run: dir.display().to_string(),
                     episode: i,
@@ -139,6 +141,7 @@ pub fn infer_run_with(
         Ok((returns, lengths, times_ms))
     });
     bar.finish_and_clear();
+    let logs = recorder.into_logs();
     let _ = env.close();
     let fatal = policies.errors_are_fatal();
     let finished = rollouts.and_then(|(returns, lengths, times_ms)| {
@@ -191,6 +194,8 @@ pub fn infer_run_with(
             random_observation_failures: random_failures,
             system,
         };
+        // The logs first: results on disk always have their proof beside them.
+        write_episode_logs(dir, INFERENCE_EPISODES_FILE, &logs)?;
         write_json_atomic(&dir.join(INFERENCE_FILE), &results)?;
         Ok(results)
     });
@@ -205,6 +210,20 @@ pub fn infer_run_with(
         }
     }
     finished
+}
+
+/// The reset seed of inference episode `index` of a run with `run_seed` (what `verify` checks
+/// the logged seeds against).
+///
+/// ```
+/// use a2perf_pipeline::infer::inference_episode_seed;
+/// assert_eq!(inference_episode_seed(0, 3), inference_episode_seed(0, 3));
+/// assert_ne!(inference_episode_seed(0, 3), inference_episode_seed(1, 3));
+/// ```
+pub fn inference_episode_seed(run_seed: u64, index: usize) -> u64 {
+    RngStream::new(run_seed, "inference/episodes")
+        .derive_index(index as u64)
+        .next_u64()
 }
 
 /// One greedy episode, timing every `act` call (milliseconds appended to `times_ms`; the

@@ -15,6 +15,8 @@ use crate::{
     InferenceResults, LoadedRun, MetricSettings, PipelineError, Result,
 };
 
+pub use crate::run_dir::expand_runs;
+
 /// Options of [`run_experiments`].
 #[derive(Clone)]
 pub struct RunOptions {
@@ -59,22 +61,6 @@ pub enum RunEvent<'a> {
     Generalized(&'a Path, &'a GeneralizationResults),
     /// The report was written to the directory.
     Reported(&'a Path, &'a Report),
-}
-
-/// Every run directory at or below each of `dirs`; a directory without any is an error naming it.
-pub fn expand_runs(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for d in dirs {
-        let found = crate::find_runs(d)?;
-        if found.is_empty() {
-            return Err(PipelineError::Invalid(format!(
-                "{}: no run directories (no run.json) found",
-                d.display()
-            )));
-        }
-        out.extend(found);
-    }
-    Ok(out)
 }
 
 /// The bootstrap repetitions recorded by the first run below `dirs` (the config's

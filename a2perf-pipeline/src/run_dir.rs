@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use a2perf_core::replay::EpisodeLog;
 use a2perf_core::{
     Checkpoint, Env, EnvSpec, LearningCurve, Policy, Registry, ResumeDir, ResumePoint, ResumeWrite,
     RunDir, TimeSplit, TrainingSettings, Value, write_atomic, write_json_atomic,
@@ -75,6 +76,88 @@ pub const SUBMISSION_CODE_DIR: &str = "submission/code";
 /// `submission/files/`: a submission's own files, what its `train()` saves for its
 /// `load_policy` (`a2perf_rs.submission.task().files_dir`).
 pub const SUBMISSION_FILES_DIR: &str = "submission/files";
+
+/// `episodes/`: the logged actions and seeds of every inference and generalization episode.
+pub const EPISODES_DIR: &str = "episodes";
+/// `episodes/inference.json`: the logs of `infer`'s rollouts, in episode order.
+pub const INFERENCE_EPISODES_FILE: &str = "episodes/inference.json";
+/// `episodes/generalization/`: one log file per generalization task.
+pub const GENERALIZATION_EPISODES_DIR: &str = "episodes/generalization";
+
+/// `episodes/generalization/<task>.json`, relative to the run directory: the logs of one
+/// generalization task's rollouts (the task's name made path-safe).
+///
+/// ```
+/// use a2perf_pipeline::run_dir::generalization_episodes_file;
+/// assert_eq!(
+///     generalization_episodes_file("a/b c"),
+///     "episodes/generalization/a_b_c.json"
+/// );
+/// ```
+pub fn generalization_episodes_file(task: &str) -> String {
+    format!("{GENERALIZATION_EPISODES_DIR}/{}.json", path_safe(task))
+}
+
+/// Writes episode logs to `dir/name` as compact JSON (they are the bulk of a bundle).
+pub(crate) fn write_episode_logs(dir: &Path, name: &str, logs: &[EpisodeLog]) -> Result<()> {
+    let path = dir.join(name);
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).map_err(io_err(parent))?;
+    }
+    Ok(a2perf_core::write_json_compact_atomic(&path, &logs)?)
+}
+
+/// Every run directory at or below each of `dirs`; a directory without any is an error naming it.
+pub fn expand_runs(dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for d in dirs {
+        let found = find_runs(d)?;
+        if found.is_empty() {
+            return Err(PipelineError::Invalid(format!(
+                "{}: no run directories (no run.json) found",
+                d.display()
+            )));
+        }
+        out.extend(found);
+    }
+    Ok(out)
+}
+
+/// `status.json` (written by [`a2perf_core::RunDir`]).
+pub const STATUS_FILE: &str = "status.json";
+/// `env_identity.json`: the content hashes of every environment a run used (a bundle member
+/// that `a2perf bundle` adds; see [`bundle`](crate::bundle)).
+pub const IDENTITY_FILE: &str = "env_identity.json";
+/// `submission/`: what `a2perf submit` keeps of a submission in its run directory (its folder
+/// under [`SUBMISSION_CODE_DIR`], its own files under [`SUBMISSION_FILES_DIR`]); a bundle
+/// carries it.
+pub const PARTICIPANT_DIR: &str = "submission";
+
+/// The files of a complete run that a bundle carries when present (besides the episode logs,
+/// the checkpoint and a submission's folder): its record, configuration, curves, results and
+/// system figures.
+pub const BUNDLED_FILES: &[&str] = &[
+    RUN_FILE,
+    STATUS_FILE,
+    OPERATIVE_FILE,
+    CURVE_CSV,
+    CURVE_JSON,
+    TRAIN_SYSTEM_FILE,
+    TRAIN_SEGMENTS_FILE,
+    SYSTEM_INFO_FILE,
+    TRAIN_EMISSIONS_FILE,
+    INFERENCE_FILE,
+    INFERENCE_EMISSIONS_FILE,
+    GENERALIZATION_FILE,
+];
+
+/// Decodes an episode-log file's bytes (`origin` names it in errors).
+pub fn parse_episode_logs(bytes: &[u8], origin: &Path) -> Result<Vec<EpisodeLog>> {
+    serde_json::from_slice(bytes).map_err(|e| PipelineError::Corrupt {
+        path: origin.to_path_buf(),
+        reason: e.to_string(),
+    })
+}
 
 /// `collect/`: the run's checkpoint evaluations (`collect` writes them).
 pub const COLLECT_DIR: &str = "collect";
@@ -356,7 +439,19 @@ pub fn load_checkpoint_policy(
     spec: &EnvSpec,
 ) -> Result<Box<dyn Policy>> {
     let bytes = std::fs::read(path).map_err(io_err(path))?;
-    let ckpt = Checkpoint::from_bytes(&bytes).map_err(|e| PipelineError::Corrupt {
+    policy_from_checkpoint_bytes(registry, &bytes, path, spec)
+}
+
+/// Rebuilds the policy saved in checkpoint `bytes` (read from `path`, which errors name) with
+/// the registered loader of its algorithm. Only the benchmark's own loaders run: a checkpoint
+/// is data.
+pub fn policy_from_checkpoint_bytes(
+    registry: &Registry,
+    bytes: &[u8],
+    path: &Path,
+    spec: &EnvSpec,
+) -> Result<Box<dyn Policy>> {
+    let ckpt = Checkpoint::from_bytes(bytes).map_err(|e| PipelineError::Corrupt {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;

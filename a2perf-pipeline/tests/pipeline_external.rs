@@ -128,6 +128,16 @@ fn train_external(out: &Path, config: &Path, seed: u64) -> PathBuf {
     dir
 }
 
+/// A temporary directory with the corridor config and a complete external run (seed 0) in it:
+/// the directory, the registry, the config and the run.
+fn trained_external() -> (tempfile::TempDir, a2perf_core::Registry, PathBuf, PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let reg = common::registry();
+    let cfg = config(tmp.path());
+    let dir = train_external(tmp.path(), &cfg, 0);
+    (tmp, reg, cfg, dir)
+}
+
 fn files(dir: &Path) -> Vec<String> {
     let mut out: Vec<String> = std::fs::read_dir(dir)
         .unwrap()
@@ -453,10 +463,7 @@ fn collect_reads_external_checkpoints_through_the_source() {
 
 #[test]
 fn reruns_start_unfinished_external_runs_again_and_refuse_complete_ones() {
-    let tmp = tempfile::tempdir().unwrap();
-    let reg = common::registry();
-    let cfg = config(tmp.path());
-    let dir = train_external(tmp.path(), &cfg, 0);
+    let (tmp, reg, cfg, dir) = trained_external();
     let plan = external_plan(&reg, &spec(tmp.path(), &cfg, 0)).unwrap();
     let err = ExternalRun::begin(&reg, plan.clone(), 0, agent(), &common::test_meters())
         .unwrap_err()
@@ -663,4 +670,62 @@ fn inference_prepares_every_timed_call_with_its_own_observation() {
         assert_eq!(p.prepared, calls + samples, "{source:?}");
         assert_eq!(p.unprepared_calls, 0, "{source:?}");
     }
+}
+
+#[test]
+fn an_external_run_bundles_with_its_files_and_verifies_without_its_code() {
+    use a2perf_pipeline::bundle::{ArchiveLimits, Bundle, Outcome, VerifyOptions, pack};
+    let (tmp, reg, _, e) = trained_external();
+    let mut source = AgentPolicies::new(None, true);
+    let opts = InferOptions {
+        meters: common::test_meters(),
+        ..Default::default()
+    };
+    a2perf_pipeline::infer_run_with(&reg, &e, &mut source, &opts).unwrap();
+    a2perf_pipeline::generalize_run_with(&reg, &e, &mut source, Some(2), false).unwrap();
+    // A submission's folder, kept in the run: carried, never run.
+    let folder = e.join(a2perf_pipeline::run_dir::PARTICIPANT_DIR);
+    std::fs::create_dir_all(&folder).unwrap();
+    std::fs::write(
+        folder.join("train.py"),
+        "raise SystemExit('must not run')\n",
+    )
+    .unwrap();
+
+    let file = tmp.path().join("external.a2perf");
+    pack(&reg, std::slice::from_ref(&e), &file).unwrap();
+    let bundle = Bundle::read(&file, &ArchiveLimits::default()).unwrap();
+    let names: Vec<&str> = bundle.archive().names().collect();
+    let has = |suffix: &str| names.iter().any(|n| n.ends_with(suffix));
+    assert!(
+        has("/participant/train.py") && has("/episodes/inference.json"),
+        "{names:?}"
+    );
+    assert_eq!(
+        names.iter().filter(|n| n.contains("/checkpoints/")).count(),
+        2
+    );
+    assert!(!has("/policy.ckpt"));
+
+    let v = bundle.verify(&reg, &VerifyOptions { retrain: true });
+    assert!(v.holds(), "{:#?}", v.checks);
+    let outcome = |what: &str| {
+        v.checks
+            .iter()
+            .find(|c| c.what.starts_with(what))
+            .map(|c| c.outcome.clone())
+    };
+    assert!(matches!(
+        outcome("inference returns"),
+        Some(Outcome::Holds(_))
+    ));
+    assert!(matches!(
+        outcome("generalization returns"),
+        Some(Outcome::Holds(_))
+    ));
+    assert!(matches!(
+        outcome("checkpoint re-run"),
+        Some(Outcome::Skipped(_))
+    ));
+    assert!(matches!(outcome("retrain"), Some(Outcome::Skipped(_))));
 }

@@ -46,7 +46,18 @@ __all__ = [
     "env_ids",
     "env_params",
     "register_all",
+    "verify",
 ]
+
+
+def verify(path: str, retrain: bool = False) -> dict[str, Any]:
+    """``a2perf verify`` in this process: checks the bundle at ``path`` (its manifest, a replay
+    of every logged episode, the stated means, and for built-in algorithms a re-run of the
+    checkpoint; with ``retrain=True`` also retraining, see docs/bundles.md). Returns
+    ``{"holds": bool, "checks": [{"run", "what", "outcome", "detail"}, ...]}`` with ``outcome``
+    one of ``"holds"``, ``"fails"``, ``"skipped"``. No code from the bundle runs. A bundle that
+    cannot be read at all (truncated, edited, unsafe members) raises ``ValueError``."""
+    return json.loads(_native.verify(str(path), retrain))
 
 
 def bench(

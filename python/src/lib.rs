@@ -102,6 +102,35 @@ fn bench_env(
         .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
 }
 
+/// `a2perf verify` in this process: the checks as JSON (`a2perf_rs.verify` parses it). A bundle
+/// that cannot be read at all (truncated, tampered with, unsafe) raises `ValueError`. The GIL
+/// is released meanwhile.
+#[pyfunction(name = "verify")]
+#[pyo3(signature = (path, retrain=false))]
+fn verify_bundle(py: Python<'_>, path: std::path::PathBuf, retrain: bool) -> PyResult<String> {
+    use a2perf_pipeline::bundle::{Outcome, VerifyOptions, verify};
+    let v = py.detach(|| {
+        errors::guard("verify", || {
+            verify(env::registry(), &path, &VerifyOptions { retrain })
+                .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))
+        })
+    })?;
+    let checks: Vec<serde_json::Value> = v
+        .checks
+        .iter()
+        .map(|c| {
+            let (outcome, detail) = match &c.outcome {
+                Outcome::Holds(d) => ("holds", d),
+                Outcome::Fails(d) => ("fails", d),
+                Outcome::Skipped(d) => ("skipped", d),
+            };
+            serde_json::json!({"run": c.run, "what": c.what, "outcome": outcome, "detail": detail})
+        })
+        .collect();
+    serde_json::to_string(&serde_json::json!({"holds": v.holds(), "checks": checks}))
+        .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))
+}
+
 /// `None` when Chromium and chromedriver are installed, else the reason they cannot be used.
 #[pyfunction]
 fn chromium_unavailable_reason() -> Option<String> {
@@ -121,6 +150,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(env_entries, m)?)?;
     m.add_function(wrap_pyfunction!(chromium_unavailable_reason, m)?)?;
     m.add_function(wrap_pyfunction!(bench_env, m)?)?;
+    m.add_function(wrap_pyfunction!(verify_bundle, m)?)?;
     m.add_class::<env::PyEnv>()?;
     m.add_class::<vec_env::PyVecEnv>()?;
     metrics::register(m)?;

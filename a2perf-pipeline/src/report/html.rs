@@ -611,12 +611,13 @@ fn leaderboard(s: &mut String, report: &Report) {
         );
         let _ = write!(
             s,
-            "<td data-sort=\"{0}\">{0}</td><th scope=\"row\" data-sort=\"{1}\"><a href=\"#task-{ti}\">{1}</a></th><td data-sort=\"{2}\">{3}</td><td data-sort=\"{4}\">{4}</td>",
+            "<td data-sort=\"{0}\">{0}</td><th scope=\"row\" data-sort=\"{1}\"><a href=\"#task-{ti}\">{1}</a></th><td data-sort=\"{2}\">{3}{5}</td><td data-sort=\"{4}\">{4}</td>",
             escape(&g.domain),
             escape(&g.task),
             escape(&g.algorithm),
             escape(&g.algorithm.to_uppercase()),
-            g.seeds.len()
+            g.seeds.len(),
+            verified_badge(g)
         );
         for (key, _) in LEADERBOARD_METRICS {
             let Some((mi, m)) = g.metrics.iter().enumerate().find(|(_, m)| m.key == *key) else {
@@ -707,8 +708,9 @@ fn task_section(s: &mut String, report: &Report, runs: &[RunView], ti: usize, ta
     for (_, g) in &groups {
         let _ = write!(
             s,
-            "<th scope=\"col\">{} <span class=\"sub\">({} seeds)</span></th>",
+            "<th scope=\"col\">{}{} <span class=\"sub\">({} seeds)</span></th>",
             escape(&g.algorithm.to_uppercase()),
+            verified_badge(g),
             g.seeds.len()
         );
         if paper.is_some() {
@@ -1194,6 +1196,17 @@ fn skipped(s: &mut String, report: &Report) {
         );
     }
     s.push_str("</tbody>\n</table></div>\n</section>\n");
+}
+
+/// The mark of a group whose runs all came from verified bundles (nothing otherwise, so pages
+/// made without bundles are unchanged).
+fn verified_badge(g: &GroupReport) -> &'static str {
+    if g.verified {
+        " <span class=\"verified\" title=\"every run of this column came from a bundle that \
+         verified: its episodes replayed to the stated returns\">&#10003; verified</span>"
+    } else {
+        ""
+    }
 }
 
 #[cfg(test)]

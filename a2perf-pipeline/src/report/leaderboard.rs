@@ -30,6 +30,9 @@ pub struct LeaderboardEntry<'a> {
     pub inconsistent_settings: Vec<String>,
     /// Metric key → {mean, std, ci95, unit, higher_is_better, note}.
     pub metrics: BTreeMap<&'a str, &'a super::MetricValue>,
+    /// Every run came from a bundle that verified (absent when not).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub verified: bool,
 }
 
 /// `leaderboard.json`.
@@ -81,6 +84,7 @@ pub fn leaderboard<'a>(report: &'a Report, groups: &'a [Group]) -> Leaderboard<'
             run: first,
             inconsistent_settings: inconsistent,
             metrics: gr.metrics.iter().map(|m| (m.key.as_str(), m)).collect(),
+            verified: gr.verified,
         });
     }
     Leaderboard {

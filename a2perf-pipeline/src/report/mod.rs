@@ -56,6 +56,26 @@ pub fn page_from_report_dirs(dirs: &[PathBuf]) -> Result<(Report, String)> {
     Ok((merged, page))
 }
 
+/// Runs proven by bundles that verified (see [`crate::bundle::Bundle::extract`]), and what the
+/// report does with them.
+#[derive(Clone, Debug, Default)]
+pub struct VerifiedRuns {
+    /// The run directories extracted from verified bundles.
+    pub runs: Vec<PathBuf>,
+    /// Restrict `leaderboard.json` to the verified groups.
+    pub only: bool,
+}
+
+impl VerifiedRuns {
+    /// Marks each group of `report` whose runs (`groups`, in the same order) are all verified.
+    fn mark(&self, report: &mut Report, groups: &[Group]) {
+        for (gr, g) in report.groups.iter_mut().zip(groups) {
+            gr.verified =
+                !g.runs.is_empty() && g.runs.iter().all(|r| self.runs.contains(&r.run.dir));
+        }
+    }
+}
+
 /// Computes the report of the runs below `dirs`.
 pub fn build_report(dirs: &[PathBuf], opts: &ReportOptions) -> Result<(Report, Vec<Group>)> {
     build_report_with_paper(dirs, opts, None)
@@ -106,7 +126,20 @@ pub fn write_report_with_paper(
     opts: &ReportOptions,
     paper: Option<&paper::PaperTables>,
 ) -> Result<Report> {
-    let (report, groups) = build_report_with_paper(dirs, opts, paper)?;
+    write_report_verified(dirs, out, opts, paper, &VerifiedRuns::default())
+}
+
+/// [`write_report_with_paper`], marking the groups whose runs are all in `verified` and, with
+/// [`VerifiedRuns::only`], leaving the others out of `leaderboard.json`.
+pub fn write_report_verified(
+    dirs: &[PathBuf],
+    out: &Path,
+    opts: &ReportOptions,
+    paper: Option<&paper::PaperTables>,
+    verified: &VerifiedRuns,
+) -> Result<Report> {
+    let (mut report, groups) = build_report_with_paper(dirs, opts, paper)?;
+    verified.mark(&mut report, &groups);
     std::fs::create_dir_all(out.join("plots")).map_err(io_err(out))?;
     let write = |name: &str, text: &str| -> Result<()> {
         let p = out.join(name);
@@ -139,10 +172,11 @@ pub fn write_report_with_paper(
         )?;
     }
     a2perf_core::write_json_atomic(&out.join("report.json"), &report)?;
-    a2perf_core::write_json_atomic(
-        &out.join("leaderboard.json"),
-        &leaderboard::leaderboard(&report, &groups),
-    )?;
+    let mut board = leaderboard::leaderboard(&report, &groups);
+    if verified.only {
+        board.entries.retain(|e| e.verified);
+    }
+    a2perf_core::write_json_atomic(&out.join("leaderboard.json"), &board)?;
     let tasks: std::collections::BTreeSet<&str> =
         report.groups.iter().map(|g| g.task.as_str()).collect();
     for task in tasks {
@@ -194,6 +228,7 @@ fn group_report(group: &Group, opts: &ReportOptions) -> GroupReport {
         algorithm: group.algorithm.clone(),
         seeds: runs.iter().map(|r| r.run.record.seed).collect(),
         metrics,
+        verified: false,
         time_split: group_time_split(runs),
     }
 }

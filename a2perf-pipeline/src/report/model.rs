@@ -116,6 +116,10 @@ pub struct GroupReport {
     pub seeds: Vec<u64>,
     /// The metrics, in table order.
     pub metrics: Vec<MetricValue>,
+    /// Every run of the group came from a bundle that verified (see [`crate::bundle`]);
+    /// absent (false) otherwise, so reports made without bundles are unchanged.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub verified: bool,
     /// Where the group's training wall time went, summed over its runs (when every run
     /// recorded it).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -466,7 +466,8 @@ fn task_md(s: &mut String, report: &Report, task: &str) {
     let _ = write!(s, "| Category | Metric | ");
     for g in &groups {
         let algorithm = md_text(&g.algorithm.to_uppercase());
-        let _ = write!(s, "{algorithm} (seeds {}) | ", g.seeds.len());
+        let verified = if g.verified { ", **verified**" } else { "" };
+        let _ = write!(s, "{algorithm} (seeds {}{verified}) | ", g.seeds.len());
         if paper.is_some() {
             let _ = write!(s, "{algorithm} (paper) | ");
         }
