@@ -302,3 +302,26 @@ def test_bad_participant_args_are_refused(tmp_path) -> None:
     assert out.returncode != 0
     assert "`elite` is not `key=value`" in out.stderr, out.stderr
     assert not any(tmp_path.iterdir())
+
+
+def test_the_submission_and_the_builtin_bundle_and_verify(example) -> None:
+    """Bundle → verify passes for the submission (replay; no participant code runs) and for the
+    built-in PPO beside it (replay and the checkpoint re-run). The tampering cases are tested on
+    bundles in a2perf-pipeline/tests and a2perf-cli/tests."""
+    tmp = example["tmp"]
+    cli = a2perf_cli()
+    for name, runs in [("submission", example["run"]),
+                       ("builtin", tmp / "builtin" / "circuit_ppo")]:
+        bundle = tmp / f"{name}.a2perf"
+        packed = subprocess.run([cli, "bundle", str(runs), "-o", str(bundle)], cwd=REPO,
+                                capture_output=True, text=True)
+        assert packed.returncode == 0, packed.stderr
+        verified = subprocess.run([cli, "verify", str(bundle)], cwd=REPO, capture_output=True,
+                                  text=True)
+        assert verified.returncode == 0, f"{name}:\n{verified.stdout}\n{verified.stderr}"
+        assert "FAILS" not in verified.stdout, verified.stdout
+    # The submission's folder travels in its bundle.
+    import tarfile
+    with tarfile.open(tmp / "submission.a2perf", "r:gz") as tar:
+        names = tar.getnames()
+    assert any(n.endswith("submission/code/train.py") for n in names), names
