@@ -698,7 +698,10 @@ fn an_external_run_bundles_with_its_files_and_verifies_without_its_code() {
     let names: Vec<&str> = bundle.archive().names().collect();
     let has = |suffix: &str| names.iter().any(|n| n.ends_with(suffix));
     assert!(
-        has("/participant/train.py") && has("/episodes/inference.json"),
+        has(&format!(
+            "/{}/train.py",
+            a2perf_pipeline::run_dir::PARTICIPANT_DIR
+        )) && has("/episodes/inference.json"),
         "{names:?}"
     );
     assert_eq!(
