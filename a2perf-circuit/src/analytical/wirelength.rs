@@ -303,6 +303,84 @@ fn bounds(v: &[f64]) -> (f64, f64) {
 mod tests {
     use super::*;
 
+    /// WA and its gradient of one net on one axis, straight from the definition with each
+    /// soft extreme shifted by its own extreme (libm's `exp`).
+    fn wa_reference(v: &[f64], gamma: f64) -> (f64, Vec<f64>) {
+        let (hi, lo) = bounds(v);
+        let ea: Vec<f64> = v.iter().map(|x| ((x - hi) / gamma).exp()).collect();
+        let eb: Vec<f64> = v.iter().map(|x| ((lo - x) / gamma).exp()).collect();
+        let (sa, sb) = (ea.iter().sum::<f64>(), eb.iter().sum::<f64>());
+        let ma = v.iter().zip(&ea).map(|(x, e)| x * e).sum::<f64>() / sa;
+        let mb = v.iter().zip(&eb).map(|(x, e)| x * e).sum::<f64>() / sb;
+        let grad = v
+            .iter()
+            .zip(ea.iter().zip(&eb))
+            .map(|(x, (a, b))| {
+                a / sa * (1.0 + (x - ma) / gamma) - b / sb * (1.0 - (x - mb) / gamma)
+            })
+            .collect();
+        (ma - mb, grad)
+    }
+
+    #[test]
+    fn shared_and_wide_net_exponentials_agree_with_the_definition() {
+        // x spans 0..90: with γ = 30 one shared exponential serves the net; with γ = 0.05 the
+        // span is 1,800 γ, so the net takes the two shifted exponentials. y stays narrow.
+        let pos = [[0.0, 1.0], [10.0, 2.0], [90.0, 2.5], [89.9, 1.5]];
+        let mut nets = WaNets::default();
+        nets.push_net(
+            (0..4).map(|k| Pin {
+                obj: k,
+                dx: 0.0,
+                dy: 0.0,
+            }),
+            1.0,
+            true,
+        );
+        for gamma in [30.0, 0.05] {
+            let mut grad = [[0.0; 2]; 4];
+            let stats = nets.evaluate(&pos, gamma, &mut grad);
+            let (wx, gx) = wa_reference(&pos.map(|p| p[0]), gamma);
+            let (wy, gy) = wa_reference(&pos.map(|p| p[1]), gamma);
+            assert!(
+                (stats.wa - (wx + wy)).abs() <= 1e-12 * (wx + wy),
+                "γ {gamma}"
+            );
+            for k in 0..4 {
+                assert!((grad[k][0] - gx[k]).abs() <= 1e-12, "γ {gamma} x {k}");
+                assert!((grad[k][1] - gy[k]).abs() <= 1e-12, "γ {gamma} y {k}");
+            }
+            assert_eq!(nets.wide.len(), usize::from(gamma < 1.0));
+        }
+    }
+
+    #[test]
+    fn the_avx2_build_gives_the_same_bits_as_the_generic_one() {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let pos: Vec<[f64; 2]> = (0..40)
+                .map(|k| [(k * 37 % 101) as f64 * 0.7, (k * 53 % 89) as f64 * 0.3])
+                .collect();
+            let mut nets = WaNets::default();
+            for n in 0..25u32 {
+                let pins = (0..2 + n % 7).map(|j| Pin {
+                    obj: if j == 3 { FIXED } else { (n * 7 + j * 11) % 40 },
+                    dx: 0.1 * j as f64,
+                    dy: -0.2 * j as f64,
+                });
+                nets.push_net(pins, 1.0 + 0.1 * n as f64, n % 11 != 0);
+            }
+            for gamma in [0.01, 0.7, 25.0] {
+                let (mut g1, mut g2) = (vec![[0.0; 2]; 40], vec![[0.0; 2]; 40]);
+                let s1 = nets.evaluate_generic(&pos, gamma, &mut g1);
+                // SAFETY: the CPU has AVX2 (checked above).
+                let s2 = unsafe { nets.evaluate_avx2(&pos, gamma, &mut g2) };
+                assert_eq!(s1, s2);
+                assert_eq!(g1, g2);
+            }
+        }
+    }
+
     #[test]
     fn exp_clamped_is_within_two_ulp_of_libm() {
         let mut worst = 0.0f64;
