@@ -1,7 +1,12 @@
 //! The analytical placer (`std_cell_placer = "dreamplace"`) at the end of an episode: hard
 //! macros fixed at the netlist's initial placement, soft macros and standard cells placed, on
-//! circuit_training's toy and on Ariane133/NanGate45 from `../shared/data/circuit` (the
-//! generated Ariane-scale circuit when it is absent). One thread.
+//! circuit_training's toy and on Ariane133/NanGate45 from `../shared/data/circuit` (a row whose
+//! data is absent is skipped with the reason printed). One thread: the placer has no parallel
+//! code.
+//!
+//! ```text
+//! cargo bench -p a2perf-circuit --bench analytical
+//! ```
 
 use std::hint::black_box;
 use std::path::Path;
@@ -9,9 +14,7 @@ use std::path::Path;
 use a2perf_circuit::analytical::{
     AnalyticalParams, AnalyticalScratch, MovableMacros, place_analytical,
 };
-use a2perf_circuit::{
-    CostSettings, GeneratorConfig, Netlist, Placement, PlacementCost, SoftMacroRule, generate,
-};
+use a2perf_circuit::{CostSettings, Netlist, Placement, PlacementCost, SoftMacroRule};
 use criterion::{Criterion, criterion_group, criterion_main};
 
 fn shared(name: &str, netlist: &str) -> Option<PlacementCost> {
@@ -33,17 +36,16 @@ fn shared(name: &str, netlist: &str) -> Option<PlacementCost> {
 
 fn benches(c: &mut Criterion) {
     let mut cases = Vec::new();
-    if let Some(cost) = shared("toy_macro_stdcell", "netlist.pb.txt") {
-        cases.push(("toy_macro_stdcell", cost));
-    }
-    match shared("ariane133_ng45", "netlist.pb.txt.gz") {
-        Some(cost) => cases.push(("ariane133_ng45", cost)),
-        None => {
-            eprintln!("../shared absent: benchmarking the generated Ariane-scale netlist");
-            let g = generate(&GeneratorConfig::ariane_scale(), 0);
-            let mut cost = PlacementCost::new(&g.netlist, g.settings.clone()).unwrap();
-            cost.apply_placement(&g.placement).unwrap();
-            cases.push(("synthetic_ariane", cost));
+    for (name, file) in [
+        ("toy_macro_stdcell", "netlist.pb.txt"),
+        ("ariane133_ng45", "netlist.pb.txt.gz"),
+    ] {
+        match shared(name, file) {
+            Some(cost) => cases.push((name, cost)),
+            None => eprintln!(
+                "skipping circuit/{name}: ../shared/data/circuit/{name}/{file} and initial.plc \
+                 are absent or unreadable"
+            ),
         }
     }
     let params = AnalyticalParams::circuit_training();

@@ -1,5 +1,6 @@
 //! Both standard-cell placers at the netlist's own macro positions (`initial.plc`), on
-//! circuit_training's toy and Ariane133/NanGate45 from `../shared/data/circuit`: HPWL, the three
+//! circuit_training's toy and Ariane133/NanGate45 from `../shared/data/circuit`, and at
+//! Ariane133's `legalized.plc` (the reference placement's cells as the start): HPWL, the three
 //! cost terms, the proxy cost and the placer's CPU time (median of seven runs, one thread).
 //!
 //! ```text
@@ -30,14 +31,15 @@ fn main() {
         env!("CARGO_MANIFEST_DIR"),
         "/../../shared/data/circuit"
     ));
-    for (name, file) in [
-        ("toy_macro_stdcell", "netlist.pb.txt"),
-        ("ariane133_ng45", "netlist.pb.txt.gz"),
+    for (name, file, plc) in [
+        ("toy_macro_stdcell", "netlist.pb.txt", "initial.plc"),
+        ("ariane133_ng45", "netlist.pb.txt.gz", "initial.plc"),
+        ("ariane133_ng45", "netlist.pb.txt.gz", "legalized.plc"),
     ] {
         let dir = root.join(name);
         let (Ok(netlist), Ok(placement)) = (
             Netlist::from_file(dir.join(file), SoftMacroRule::default()),
-            Placement::from_file(dir.join("initial.plc")),
+            Placement::from_file(dir.join(plc)),
         ) else {
             eprintln!("{name}: not found under {}", root.display());
             continue;
@@ -51,6 +53,7 @@ fn main() {
             eprintln!("{name}: {e}");
             continue;
         }
+        println!("{name} {plc}:");
         let c = cost.costs();
         println!(
             "{name:18} {:10} HPWL {:12.1} wl {:.6} density {:.6} congestion {:.6} proxy {:.6}",

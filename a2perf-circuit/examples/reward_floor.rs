@@ -16,8 +16,9 @@
 //!   best and worst return, and how many episodes stranded a macro (the infeasible reward), which
 //!   tells whether an exploring agent meets the infeasible outcome at all.
 //!
-//! `cargo run --release -p a2perf-circuit --example reward_floor -- [toy|ariane|both|random] [DATA_DIR]`
-//! (`DATA_DIR` defaults to `../shared/data`, as `A2PERF_PAPER_DATA` does.)
+//! `cargo run --release -p a2perf-circuit --example reward_floor -- [toy|ariane|both|random] [DATA_DIR] [--placer dreamplace|fd]`
+//! (`DATA_DIR` defaults to `../shared/data`, as `A2PERF_PAPER_DATA` does; `--placer fd` swaps
+//! the profile's standard-cell placer for the force-directed one, the environment's default.)
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -29,7 +30,7 @@ use a2perf_core::{Action, Env, Observation, Registry, Value};
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
 /// The profile's circuit switches, plus the netlist.
-fn profile_params(netlist: &Path) -> BTreeMap<String, Value> {
+fn profile_params(netlist: &Path, placer: &str) -> BTreeMap<String, Value> {
     BTreeMap::from([
         (
             "netlist_file".to_string(),
@@ -41,7 +42,7 @@ fn profile_params(netlist: &Path) -> BTreeMap<String, Value> {
         ("padded_action".into(), Value::Bool(true)),
         ("initial_locations".into(), Value::Str("fd".into())),
         ("soft_macros_placed".into(), Value::Bool(false)),
-        ("std_cell_placer".into(), Value::Str("dreamplace".into())),
+        ("std_cell_placer".into(), Value::Str(placer.into())),
     ])
 }
 
@@ -91,9 +92,12 @@ fn enumerate(
     Ok(())
 }
 
-fn toy(reg: &Registry, data: &Path) -> Result<()> {
+fn toy(reg: &Registry, data: &Path, placer: &str) -> Result<()> {
     let netlist = data.join("circuit/toy_macro_stdcell/netlist.pb.txt");
-    let mut env = reg.make_env("CircuitTraining-ToyMacro-v0", &profile_params(&netlist))?;
+    let mut env = reg.make_env(
+        "CircuitTraining-ToyMacro-v0",
+        &profile_params(&netlist, placer),
+    )?;
     let start = std::time::Instant::now();
     let mut episodes = Vec::new();
     enumerate(env.as_mut(), &mut Vec::new(), &mut episodes)?;
@@ -113,7 +117,7 @@ fn toy(reg: &Registry, data: &Path) -> Result<()> {
     Ok(())
 }
 
-fn ariane(reg: &Registry, data: &Path) -> Result<()> {
+fn ariane(reg: &Registry, data: &Path, placer: &str) -> Result<()> {
     let dir = data.join("circuit/ariane133_ng45");
     let netlist_path = dir.join("netlist.pb.txt.gz");
     let netlist = Netlist::from_file(&netlist_path, SoftMacroRule::default())?;
@@ -128,7 +132,10 @@ fn ariane(reg: &Registry, data: &Path) -> Result<()> {
     let order = placement_order(&netlist, &fixed);
     let (cols, rows) = target.grid();
 
-    let mut env = reg.make_env("CircuitTraining-Ariane-v0", &profile_params(&netlist_path))?;
+    let mut env = reg.make_env(
+        "CircuitTraining-Ariane-v0",
+        &profile_params(&netlist_path, placer),
+    )?;
     let mut obs = env.reset(Some(0))?;
     let (mut moved, mut ret) = (0, None);
     for &node in &order {
@@ -205,7 +212,7 @@ fn random_episodes(env: &mut dyn Env, episodes: u64) -> Result<(Vec<f64>, usize)
     Ok((returns, stranded))
 }
 
-fn random(reg: &Registry, data: &Path) -> Result<()> {
+fn random(reg: &Registry, data: &Path, placer: &str) -> Result<()> {
     for (id, file) in [
         (
             "CircuitTraining-ToyMacro-v0",
@@ -216,7 +223,7 @@ fn random(reg: &Registry, data: &Path) -> Result<()> {
             "circuit/ariane133_ng45/netlist.pb.txt.gz",
         ),
     ] {
-        let mut env = reg.make_env(id, &profile_params(&data.join(file)))?;
+        let mut env = reg.make_env(id, &profile_params(&data.join(file), placer))?;
         let (r, stranded) = random_episodes(env.as_mut(), 200)?;
         let mean = r.iter().sum::<f64>() / r.len() as f64;
         let best = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -231,21 +238,32 @@ fn random(reg: &Registry, data: &Path) -> Result<()> {
 }
 
 fn main() -> Result<()> {
-    let which = std::env::args().nth(1).unwrap_or_else(|| "both".into());
-    let data = std::env::args()
-        .nth(2)
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let placer = match args.iter().position(|a| a == "--placer") {
+        Some(i) if i + 1 < args.len() => {
+            let p = args.remove(i + 1);
+            args.remove(i);
+            p
+        }
+        Some(_) => return Err("--placer needs a value (dreamplace or fd)".into()),
+        None => "dreamplace".into(),
+    };
+    let which = args.first().cloned().unwrap_or_else(|| "both".into());
+    let data = args
+        .get(1)
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
+    println!("standard-cell placer: {placer}");
     let mut reg = Registry::new();
     register(&mut reg);
     if matches!(which.as_str(), "toy" | "both") {
-        toy(&reg, &data)?;
+        toy(&reg, &data, &placer)?;
     }
     if matches!(which.as_str(), "ariane" | "both") {
-        ariane(&reg, &data)?;
+        ariane(&reg, &data, &placer)?;
     }
     if which == "random" {
-        random(&reg, &data)?;
+        random(&reg, &data, &placer)?;
     }
     if !matches!(which.as_str(), "toy" | "ariane" | "both" | "random") {
         return Err(format!("unknown task `{which}` (toy, ariane, both or random)").into());

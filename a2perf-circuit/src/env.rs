@@ -1193,6 +1193,25 @@ fn file_env(id: &str, p: &Params) -> Result<Box<dyn Env>, EnvError> {
             }
         }
     };
+    // A canvas the files state but that is not a positive finite rectangle is an error naming
+    // the file (circuit_training would silently fall back to another canvas).
+    let init_path = p.opt_str("init_placement").ok().flatten().map_or_else(
+        || {
+            Path::new(path)
+                .with_file_name("initial.plc")
+                .display()
+                .to_string()
+        },
+        str::to_string,
+    );
+    for (file, comments) in [(path.to_string(), &netlist.comments)]
+        .into_iter()
+        .chain(init.as_ref().map(|i| (init_path, &i.comments)))
+    {
+        if let Some(reason) = crate::plc::canvas_problem(comments) {
+            return Err(EnvError::BadFile { path: file, reason });
+        }
+    }
     let mut settings = CostSettings::ct_env(&netlist, init.as_ref().map(|p| &p.header));
     let config = config_from(id, p, &mut settings)?;
     // Errors about the netlist's contents name the file it came from.

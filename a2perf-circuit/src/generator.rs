@@ -15,16 +15,14 @@
 //! Every float is an f32 value, so writing the netlist and parsing it back gives the identical
 //! [`Netlist`].
 //!
-//! # Why this structure (measured)
+//! # Why this structure
 //! Macro placement must matter as it does in a real design. On the real Ariane133 (NanGate45)
-//! netlist under the CT proxy (wirelength 1, density 1, congestion 0.5), 100 random legal
-//! placements of the 133 macros (soft macros then placed by our force-directed placer) average
-//! 1.404 (wirelength 0.124, density 0.858, congestion 0.845); the legalized reference placement,
-//! snapped to the grid, costs 1.185 (15.6% below; density 0.702) and a 400-step hill climb 1.148
-//! (18.2% below; density 0.628). Density moves most: hard macros cover 50% of Ariane's canvas, so
-//! wherever scattered macros leave no room, the placer piles soft macros onto them. The earlier
-//! generator (hard macros on 30% of the canvas, soft logic loosely tied to single macros) let
-//! density and congestion barely move and capped any search at ~8% below the random mean. Hence:
+//! netlist under the CT proxy (wirelength 1, density 1, congestion 0.5), density is the term
+//! that macro placement moves most: hard macros cover 50% of Ariane's canvas, so wherever
+//! scattered macros leave no room, the standard-cell placer piles soft macros onto them. The
+//! earlier generator (hard macros on 30% of the canvas, soft logic loosely tied to single
+//! macros) let density and congestion barely move and capped any search at a few percent below
+//! the random mean. Hence:
 //!
 //! - hard macros on ~40% of the canvas (Ariane: 50%; at 45% some random legal placements of the
 //!   12-macro circuit leave a macro no legal cell), soft macros on ~30% (Ariane: 21%);
@@ -32,10 +30,10 @@
 //! - banks whose macros share buses and logic, so that grouping a bank pays in wirelength and
 //!   leaving room next to it for its logic pays in density.
 //!
-//! `small()` (seed 0): random mean 1.483 (wirelength 0.334, density 0.763, congestion 0.772), a
-//! 1,500-step hill climb 1.140 (23% below; seeds 1–3: 20–22%). `ariane_scale()`: random density
-//! 0.83 and congestion 0.84, close to the real netlist's. Congestion still moves little: our
-//! circuits have far fewer nets per routing track than a real one.
+//! (The random-placement and hill-climb costs once quoted here were measured with the
+//! force-directed placer's earlier spiral start, which the exact-centre start of the parity
+//! work replaced, and are left out rather than kept stale.) Congestion moves little on
+//! generated circuits: they have far fewer nets per routing track than a real one.
 
 use a2perf_core::RngStream;
 

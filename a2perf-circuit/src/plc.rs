@@ -82,14 +82,57 @@ pub struct Placement {
     pub entries: Vec<PlcEntry>,
 }
 
-fn nums_after(s: &str, key: &str) -> Option<f64> {
+/// The number after `key :` (NaN and infinities included).
+fn num_after(s: &str, key: &str) -> Option<f64> {
     let rest = s.split(key).nth(1)?;
     let rest = rest.trim_start().strip_prefix(':')?.trim_start();
-    rest.split_whitespace()
-        .next()?
-        .parse()
-        .ok()
-        .filter(|v: &f64| v.is_finite())
+    rest.split_whitespace().next()?.parse().ok()
+}
+
+fn nums_after(s: &str, key: &str) -> Option<f64> {
+    num_after(s, key).filter(|v: &f64| v.is_finite())
+}
+
+/// What is wrong with a canvas that header comments state (`FP bbox: {x0 y0} {W H}` or
+/// `Width : W  Height : H`) when it is not a positive finite rectangle, or `None`.
+///
+/// circuit_training's regular expressions would skip such a line and fall back to another
+/// canvas; a file that names a NaN, infinite, zero or negative canvas is broken, so it is
+/// reported instead of placed on a canvas the file did not ask for.
+///
+/// ```
+/// use a2perf_circuit::plc::canvas_problem;
+/// let lines = |s: &str| vec![s.to_string()];
+/// assert_eq!(canvas_problem(&lines("Width : 20.5  Height : 10")), None);
+/// assert_eq!(canvas_problem(&lines("FP bbox: {0.0 0.0} {200.0 100.0}")), None);
+/// assert!(canvas_problem(&lines("Width : nan  Height : 10")).is_some());
+/// assert!(canvas_problem(&lines("FP bbox: {0.0 0.0} {200.0 -1}")).is_some());
+/// ```
+pub fn canvas_problem(comments: &[String]) -> Option<String> {
+    let bad = |v: f64| !(v.is_finite() && v > 0.0);
+    for c in comments {
+        let c = c.trim();
+        if let Some(rest) = c.split("FP bbox:").nth(1) {
+            let nums: Vec<&str> = rest
+                .split(|ch: char| ch == '{' || ch == '}' || ch.is_whitespace())
+                .filter(|s| !s.is_empty())
+                .collect();
+            let size = match nums.as_slice() {
+                [_, _, w, h, ..] => w.parse::<f64>().ok().zip(h.parse::<f64>().ok()),
+                _ => None,
+            };
+            match size {
+                Some((w, h)) if !bad(w) && !bad(h) => {}
+                _ => return Some(format!("canvas `{c}` is not a positive finite rectangle")),
+            }
+        } else if c.starts_with("Width") {
+            match (num_after(c, "Width"), num_after(c, "Height")) {
+                (Some(w), Some(h)) if !bad(w) && !bad(h) => {}
+                _ => return Some(format!("canvas `{c}` is not a positive finite rectangle")),
+            }
+        }
+    }
+    None
 }
 
 pub(crate) fn parse_header(comments: &[String]) -> PlcHeader {

@@ -289,14 +289,72 @@ node { name: "C0" attr { key: "type" value { placeholder: "STDCELL" } }
     }
     // The force-directed placer has no such limit.
     assert!(make("fd").is_ok());
-    // A zero or negative canvas in the comments is not read (as circuit_training's regular
-    // expressions); the netlist's default canvas is used and the cell then fits.
-    let flat = text.replace(
-        "FP bbox: {0.0 0.0} {20.0 10.0}",
+    // A canvas the netlist states that is NaN, infinite, zero or negative is an error naming
+    // the netlist, in both modes, before any placer runs.
+    for canvas in [
+        "FP bbox: {0.0 0.0} {nan 10.0}",
+        "FP bbox: {0.0 0.0} {20.0 0.0}",
+        "FP bbox: {0.0 0.0} {-20.0 10.0}",
         "Width : 20.0  Height : 0.0",
-    );
-    std::fs::write(&path, flat).unwrap();
-    assert!(make("dreamplace").is_ok());
+        "Width : NaN  Height : 10.0",
+        "Width : inf  Height : 10.0",
+        "Width : 20.0  Height : -1",
+    ] {
+        std::fs::write(
+            &path,
+            text.replace("FP bbox: {0.0 0.0} {20.0 10.0}", canvas),
+        )
+        .unwrap();
+        for placer in ["dreamplace", "fd"] {
+            expect_bad_file(make(placer), &path, "positive finite rectangle");
+        }
+    }
+    // The same in the initial placement next to the netlist: the error names that file.
+    std::fs::write(&path, text).unwrap();
+    let plc = dir.path().join("initial.plc");
+    std::fs::write(&plc, "# Width : 0.0  Height : 10.0\n0 5 5 N 0\n").unwrap();
+    expect_bad_file(make("fd"), &plc, "positive finite rectangle");
+}
+
+/// Asserts a bad-file error naming `path` whose reason contains `what`.
+fn expect_bad_file(
+    made: Result<Box<dyn a2perf_core::Env>, RegistryError>,
+    path: &std::path::Path,
+    what: &str,
+) {
+    match made {
+        Err(RegistryError::Env {
+            source: EnvError::BadFile { path: p, reason },
+            ..
+        }) => {
+            assert_eq!(p, path.display().to_string(), "{reason}");
+            assert!(reason.contains(what), "{reason}");
+        }
+        Err(other) => panic!("expected a bad-file error, got {other}"),
+        Ok(_) => panic!("expected an error for {}", path.display()),
+    }
+}
+
+#[test]
+fn the_placer_rejects_a_degenerate_canvas_without_panicking() {
+    let g = generate(&GeneratorConfig::small(), 0);
+    for (w, h) in [
+        (f64::NAN, 10.0),
+        (0.0, 10.0),
+        (10.0, -1.0),
+        (f64::INFINITY, 5.0),
+    ] {
+        let mut settings = g.settings.clone();
+        settings.canvas_width = w;
+        settings.canvas_height = h;
+        // The cost model refuses it first; the placer refuses it too when handed one.
+        assert!(PlacementCost::new(&g.netlist, settings).is_err());
+    }
+    let cost = PlacementCost::new(&g.netlist, g.settings.clone()).unwrap();
+    assert!(matches!(
+        a2perf_circuit::analytical::check_capacity(&cost, f64::MIN_POSITIVE),
+        Err(a2perf_circuit::analytical::AnalyticalError::Capacity { .. })
+    ));
 }
 
 #[test]
