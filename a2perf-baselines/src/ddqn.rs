@@ -271,43 +271,6 @@ impl DdqnRun {
         Ok((policy, run))
     }
 
-    /// Continues from a state written by [`state_bytes`](Self::state_bytes).
-    fn restore_state(
-        &mut self,
-        bytes: &[u8],
-        policy: &mut NetPolicy,
-        ctx: &mut TrainingContext<'_>,
-    ) -> Result<(), RunError> {
-        let mut r = StateReader::new(bytes, "ddqn", STATE_VERSION)?;
-        policy.load_training_state(&mut r)?;
-        r.f32s_into("target parameters", &mut self.target_params)?;
-        self.adam.load("policy", &mut r)?;
-        self.rng = r.rng()?;
-        self.sample_rng = r.rng()?;
-        self.update_credit = r.f32()?;
-        self.updates = r.usize()?;
-        self.env_steps = r.u64()?;
-        self.replay.load(&mut r)?;
-        write_observations(&mut self.cur, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
-        r.finish()
-    }
-
-    /// The state [`restore`](Self::restore) continues from.
-    fn state_bytes(&self, policy: &NetPolicy) -> Vec<u8> {
-        let mut w = StateWriter::new("ddqn", STATE_VERSION);
-        policy.save_training_state(&mut w);
-        w.f32s(&self.target_params);
-        self.adam.save(&mut w);
-        w.rng(&self.rng);
-        w.rng(&self.sample_rng);
-        w.f32(self.update_credit);
-        w.usize(self.updates);
-        w.u64(self.env_steps);
-        self.replay.save(&mut w);
-        w.envs(&self.venv);
-        w.finish()
-    }
-
     /// ε-greedy actions over the legal ones, ε decaying linearly from `epsilon_start` to
     /// `epsilon_greedy` over the first `epsilon_decay_fraction` of the budget.
     fn choose_actions(&mut self, policy: &mut NetPolicy) -> Result<(), RunError> {
@@ -424,7 +387,18 @@ impl OnlineRun for DdqnRun {
         policy: &mut NetPolicy,
         ctx: &mut TrainingContext<'_>,
     ) -> Result<(), RunError> {
-        self.restore_state(bytes, policy, ctx)
+        let mut r = StateReader::new(bytes, "ddqn", STATE_VERSION)?;
+        policy.load_training_state(&mut r)?;
+        r.f32s_into("target parameters", &mut self.target_params)?;
+        self.adam.load("policy", &mut r)?;
+        self.rng = r.rng()?;
+        self.sample_rng = r.rng()?;
+        self.update_credit = r.f32()?;
+        self.updates = r.usize()?;
+        self.env_steps = r.u64()?;
+        self.replay.load(&mut r)?;
+        write_observations(&mut self.cur, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
+        r.finish()
     }
 
     fn reset(&mut self) -> Result<(), RunError> {
@@ -442,7 +416,18 @@ impl OnlineRun for DdqnRun {
     }
 
     fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
-        self.state_bytes(policy)
+        let mut w = StateWriter::new("ddqn", STATE_VERSION);
+        policy.save_training_state(&mut w);
+        w.f32s(&self.target_params);
+        self.adam.save(&mut w);
+        w.rng(&self.rng);
+        w.rng(&self.sample_rng);
+        w.f32(self.update_credit);
+        w.usize(self.updates);
+        w.u64(self.env_steps);
+        self.replay.save(&mut w);
+        w.envs(&self.venv);
+        w.finish()
     }
 
     fn close(&mut self) -> Result<(), RunError> {

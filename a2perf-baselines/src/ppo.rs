@@ -394,47 +394,6 @@ impl PpoRun {
         }
     }
 
-    /// Continues from a state written by [`state_bytes`](Self::state_bytes).
-    fn restore_state(
-        &mut self,
-        bytes: &[u8],
-        policy: &mut NetPolicy,
-        ctx: &mut TrainingContext<'_>,
-    ) -> Result<(), RunError> {
-        let mut r = StateReader::new(bytes, "ppo", STATE_VERSION)?;
-        policy.load_training_state(&mut r)?;
-        self.adam.load("policy", &mut r)?;
-        self.scaler.load(&mut r)?;
-        self.rng = r.rng()?;
-        self.mb_rng = r.rng()?;
-        let saved_order = r.usizes()?;
-        if saved_order.len() != self.rows {
-            return Err(resume_err(format!(
-                "rollout of {} rows saved, this configuration has {}",
-                saved_order.len(),
-                self.rows
-            )));
-        }
-        self.order = saved_order;
-        self.env_steps = r.u64()?;
-        write_observations(&mut self.raw, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
-        r.finish()
-    }
-
-    /// The state [`restore`](Self::restore) continues from.
-    fn state_bytes(&self, policy: &NetPolicy) -> Vec<u8> {
-        let mut w = StateWriter::new("ppo", STATE_VERSION);
-        policy.save_training_state(&mut w);
-        self.adam.save(&mut w);
-        self.scaler.save(&mut w);
-        w.rng(&self.rng);
-        w.rng(&self.mb_rng);
-        w.usizes(&self.order);
-        w.u64(self.env_steps);
-        w.envs(&self.venv);
-        w.finish()
-    }
-
     /// `num_steps` steps of every environment into the rollout. Rewards are scaled when
     /// configured; a truncated (not terminated) episode's reward takes the discounted value of
     /// its final observation.
@@ -763,7 +722,24 @@ impl OnlineRun for PpoRun {
         policy: &mut NetPolicy,
         ctx: &mut TrainingContext<'_>,
     ) -> Result<(), RunError> {
-        self.restore_state(bytes, policy, ctx)
+        let mut r = StateReader::new(bytes, "ppo", STATE_VERSION)?;
+        policy.load_training_state(&mut r)?;
+        self.adam.load("policy", &mut r)?;
+        self.scaler.load(&mut r)?;
+        self.rng = r.rng()?;
+        self.mb_rng = r.rng()?;
+        let saved_order = r.usizes()?;
+        if saved_order.len() != self.rows {
+            return Err(resume_err(format!(
+                "rollout of {} rows saved, this configuration has {}",
+                saved_order.len(),
+                self.rows
+            )));
+        }
+        self.order = saved_order;
+        self.env_steps = r.u64()?;
+        write_observations(&mut self.raw, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
+        r.finish()
     }
 
     fn reset(&mut self) -> Result<(), RunError> {
@@ -784,7 +760,16 @@ impl OnlineRun for PpoRun {
     }
 
     fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
-        self.state_bytes(policy)
+        let mut w = StateWriter::new("ppo", STATE_VERSION);
+        policy.save_training_state(&mut w);
+        self.adam.save(&mut w);
+        self.scaler.save(&mut w);
+        w.rng(&self.rng);
+        w.rng(&self.mb_rng);
+        w.usizes(&self.order);
+        w.u64(self.env_steps);
+        w.envs(&self.venv);
+        w.finish()
     }
 
     fn close(&mut self) -> Result<(), RunError> {

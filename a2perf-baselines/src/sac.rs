@@ -384,55 +384,6 @@ impl SacRun {
         Ok((policy, run))
     }
 
-    /// Continues from a state written by [`state_bytes`](Self::state_bytes).
-    fn restore_state(
-        &mut self,
-        bytes: &[u8],
-        policy: &mut NetPolicy,
-        ctx: &mut TrainingContext<'_>,
-    ) -> Result<(), RunError> {
-        let mut r = StateReader::new(bytes, "sac", STATE_VERSION)?;
-        policy.load_training_state(&mut r)?;
-        for (k, c) in self.critics.iter_mut().enumerate() {
-            r.f32s_into(&format!("critic {k} parameters"), &mut c.params)?;
-            r.f32s_into(&format!("critic {k} target"), &mut c.target)?;
-            c.adam.load(&format!("critic {k}"), &mut r)?;
-        }
-        self.actor_adam.load("actor", &mut r)?;
-        self.log_alpha = r.f32()?;
-        self.alpha_adam.load("temperature", &mut r)?;
-        self.rng = r.rng()?;
-        self.noise_rng = r.rng()?;
-        self.sample_rng = r.rng()?;
-        self.credit = r.f32()?;
-        self.env_steps = r.u64()?;
-        self.replay.load(&mut r)?;
-        write_observations(&mut self.cur, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
-        r.finish()
-    }
-
-    /// The state [`restore`](Self::restore) continues from.
-    fn state_bytes(&self, policy: &NetPolicy) -> Vec<u8> {
-        let mut w = StateWriter::new("sac", STATE_VERSION);
-        policy.save_training_state(&mut w);
-        for c in &self.critics {
-            w.f32s(&c.params);
-            w.f32s(&c.target);
-            c.adam.save(&mut w);
-        }
-        self.actor_adam.save(&mut w);
-        w.f32(self.log_alpha);
-        self.alpha_adam.save(&mut w);
-        w.rng(&self.rng);
-        w.rng(&self.noise_rng);
-        w.rng(&self.sample_rng);
-        w.f32(self.credit);
-        w.u64(self.env_steps);
-        self.replay.save(&mut w);
-        w.envs(&self.venv);
-        w.finish()
-    }
-
     /// Updates the observation statistics and picks every environment's action: uniformly
     /// random before `learning_starts`, then sampled from the squashed Gaussian.
     fn choose_actions(&mut self, policy: &mut NetPolicy) {
@@ -738,7 +689,24 @@ impl OnlineRun for SacRun {
         policy: &mut NetPolicy,
         ctx: &mut TrainingContext<'_>,
     ) -> Result<(), RunError> {
-        self.restore_state(bytes, policy, ctx)
+        let mut r = StateReader::new(bytes, "sac", STATE_VERSION)?;
+        policy.load_training_state(&mut r)?;
+        for (k, c) in self.critics.iter_mut().enumerate() {
+            r.f32s_into(&format!("critic {k} parameters"), &mut c.params)?;
+            r.f32s_into(&format!("critic {k} target"), &mut c.target)?;
+            c.adam.load(&format!("critic {k}"), &mut r)?;
+        }
+        self.actor_adam.load("actor", &mut r)?;
+        self.log_alpha = r.f32()?;
+        self.alpha_adam.load("temperature", &mut r)?;
+        self.rng = r.rng()?;
+        self.noise_rng = r.rng()?;
+        self.sample_rng = r.rng()?;
+        self.credit = r.f32()?;
+        self.env_steps = r.u64()?;
+        self.replay.load(&mut r)?;
+        write_observations(&mut self.cur, r.envs(&mut self.venv, &mut |m| ctx.warn(m))?)?;
+        r.finish()
     }
 
     fn reset(&mut self) -> Result<(), RunError> {
@@ -756,7 +724,24 @@ impl OnlineRun for SacRun {
     }
 
     fn save_state(&self, policy: &NetPolicy) -> Vec<u8> {
-        self.state_bytes(policy)
+        let mut w = StateWriter::new("sac", STATE_VERSION);
+        policy.save_training_state(&mut w);
+        for c in &self.critics {
+            w.f32s(&c.params);
+            w.f32s(&c.target);
+            c.adam.save(&mut w);
+        }
+        self.actor_adam.save(&mut w);
+        w.f32(self.log_alpha);
+        self.alpha_adam.save(&mut w);
+        w.rng(&self.rng);
+        w.rng(&self.noise_rng);
+        w.rng(&self.sample_rng);
+        w.f32(self.credit);
+        w.u64(self.env_steps);
+        self.replay.save(&mut w);
+        w.envs(&self.venv);
+        w.finish()
     }
 
     fn close(&mut self) -> Result<(), RunError> {
