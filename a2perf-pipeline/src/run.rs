@@ -118,13 +118,16 @@ pub fn collect_dataset(
             .is_complete()
             .unwrap_or(false)
     });
-    let request = dataset_request(&source)?;
-    let request_file = source.out.join(DATASET_REQUEST_FILE);
     // A dataset whose recorded request matches (same step, same source checkpoints) is reused:
-    // collection is seeded, so collecting it again would write the same samples.
-    let recorded = std::fs::read(&request_file).ok();
-    let same_request = recorded.as_deref() == Some(request.as_slice());
-    if !(source.samples.is_file() && (complete || same_request)) {
+    // collection is seeded, so collecting it again would write the same samples. The sources'
+    // checkpoints are hashed only when the trained runs do not already settle it.
+    if !(complete && source.samples.is_file()) {
+        let request = dataset_request(&source)?;
+        let request_file = source.out.join(DATASET_REQUEST_FILE);
+        let recorded = std::fs::read(&request_file).ok();
+        if source.samples.is_file() && recorded.as_deref() == Some(request.as_slice()) {
+            return attach_dataset(plan);
+        }
         let level = source.step.level()?;
         let mut opts = source.step.collect_options()?;
         opts.show_progress = show_progress;
