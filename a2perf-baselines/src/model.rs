@@ -572,9 +572,8 @@ fn circuit_backward(
             .zip(hr.chunks_exact(k))
         {
             for ((d, y), g) in drow.iter_mut().zip(hrow).zip(dgr.iter_mut()) {
-                if *y <= 0.0 {
-                    *d = 0.0;
-                }
+                // A select (vectorizes; see `Activation::backward`).
+                *d = if *y <= 0.0 { 0.0 } else { *d };
                 *g += *d;
             }
         }
