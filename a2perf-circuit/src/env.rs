@@ -310,6 +310,64 @@ pub struct CircuitEnv {
     cell_ccell: Vec<u32>,
     cell_block: Vec<u16>,
     block_counts: [u32; FEATURE_MAP * FEATURE_MAP],
+    /// The cells chosen this episode, in order (the key of `ends`).
+    cells: Vec<u32>,
+    ends: EndCache,
+}
+
+/// Episode ends already placed. Every episode starts from the same state and places the macros
+/// in a fixed order, and both standard-cell placers are deterministic functions of their start
+/// (the analytical placer's noise stream is seeded afresh on every call), so the placement at
+/// the end of an episode is a function of the cells chosen. A repeated episode restores it
+/// instead of running the placer again: the same positions, then the same `recompute` the
+/// placers end with, so rewards, infos and the state are bit-identical. This pays wherever
+/// placements repeat: the toy's two macros have 9,144 legal placements, and a greedy policy
+/// evaluated on a deterministic environment places the same way in every episode.
+#[derive(Clone, Debug, Default)]
+struct EndCache {
+    map: std::collections::HashMap<Vec<u32>, EndState>,
+    /// Approximate bytes held; the cache is emptied when it would exceed `limit`.
+    bytes: usize,
+    limit: usize,
+}
+
+/// What the placer changed: the moved nodes' positions and the placed flags of the macros in
+/// placement order.
+#[derive(Clone, Debug)]
+struct EndState {
+    moved: Vec<(u32, f64, f64)>,
+    placed: Vec<bool>,
+}
+
+/// Default byte budget of each environment's [`EndCache`] (about 2,000 Ariane episode ends).
+const END_CACHE_BYTES: usize = 32 << 20;
+
+impl EndCache {
+    fn new(limit: usize) -> Self {
+        Self {
+            limit,
+            ..Self::default()
+        }
+    }
+
+    fn insert(&mut self, key: Vec<u32>, state: EndState) {
+        let size = key.len() * 4 + state.moved.len() * 24 + state.placed.len() + 64;
+        if size > self.limit {
+            return;
+        }
+        if self.bytes + size > self.limit {
+            // Emptied, not evicted one by one: simple, and as deterministic.
+            self.map.clear();
+            self.bytes = 0;
+        }
+        self.bytes += size;
+        self.map.insert(key, state);
+    }
+
+    fn clear(&mut self) {
+        self.map.clear();
+        self.bytes = 0;
+    }
 }
 
 fn bad_param(name: &str, reason: impl Into<String>) -> EnvError {
@@ -610,6 +668,8 @@ impl CircuitEnv {
             cell_ccell,
             cell_block,
             block_counts,
+            cells: Vec::new(),
+            ends: EndCache::new(END_CACHE_BYTES),
         })
     }
 
@@ -618,9 +678,81 @@ impl CircuitEnv {
         &self.cost
     }
 
-    /// Mutable cost model (e.g. to query congestion maps).
+    /// Mutable cost model (e.g. to query congestion maps). Empties the cache of episode ends,
+    /// since the caller may change what they depend on.
     pub fn cost_mut(&mut self) -> &mut PlacementCost {
+        self.ends.clear();
         &mut self.cost
+    }
+
+    /// Sets the byte budget of the cache of placed episode ends (0 turns it off). Results do
+    /// not depend on it, only the time the end of a repeated episode takes.
+    ///
+    /// ```
+    /// use a2perf_circuit::{generate, CircuitEnv, CircuitEnvConfig, GeneratorConfig};
+    /// use a2perf_core::{Action, Env};
+    /// let g = generate(&GeneratorConfig::small(), 0);
+    /// let mut env = CircuitEnv::new(&g.netlist, Some(&g.placement), g.settings.clone(),
+    ///                               CircuitEnvConfig::default()).unwrap();
+    /// let mut episode = |env: &mut CircuitEnv| {
+    ///     let mut obs = env.reset(Some(0)).unwrap();
+    ///     loop {
+    ///         let a = obs.action_mask.clone().unwrap().iter().position(|m| *m).unwrap();
+    ///         let step = env.step(&Action::Discrete(a)).unwrap();
+    ///         if step.done() { return step.reward; }
+    ///         obs = step.observation.clone();
+    ///     }
+    /// };
+    /// let first = episode(&mut env);
+    /// assert_eq!(env.end_cache_len(), 1);
+    /// assert_eq!(episode(&mut env).to_bits(), first.to_bits()); // restored, not placed again
+    /// env.set_end_cache_bytes(0);
+    /// assert_eq!(episode(&mut env).to_bits(), first.to_bits());
+    /// assert_eq!(env.end_cache_len(), 0);
+    /// ```
+    pub fn set_end_cache_bytes(&mut self, bytes: usize) {
+        self.ends = EndCache::new(bytes);
+    }
+
+    /// Number of episode ends in the cache.
+    pub fn end_cache_len(&self) -> usize {
+        self.ends.map.len()
+    }
+
+    /// Runs the end-of-episode placer (`macros` as the placer takes them), or restores its
+    /// result when these cells were placed before.
+    fn place_end(&mut self, macros: MovableMacros) -> Result<(), EnvError> {
+        if let Some(state) = self.ends.map.get(&self.cells) {
+            for &(i, x, y) in &state.moved {
+                self.cost.x[i as usize] = x;
+                self.cost.y[i as usize] = y;
+            }
+            for (&i, &p) in self.order.iter().zip(&state.placed) {
+                self.cost.placed[i] = p;
+            }
+            self.cost.recompute();
+            return Ok(());
+        }
+        match self.config.std_cell_placer {
+            StdCellPlacer::Fd => {
+                place_std_cells(&mut self.cost, &self.config.fd_schedule, &mut self.fd);
+            }
+            StdCellPlacer::DreamPlace => self.place_analytically(macros)?,
+            StdCellPlacer::None => return Ok(()),
+        }
+        if self.ends.limit > 0 {
+            let moved = (0..self.base_x.len())
+                .filter(|&i| {
+                    self.cost.x[i].to_bits() != self.base_x[i].to_bits()
+                        || self.cost.y[i].to_bits() != self.base_y[i].to_bits()
+                })
+                .map(|i| (i as u32, self.cost.x[i], self.cost.y[i]))
+                .collect();
+            let placed = self.order.iter().map(|&i| self.cost.placed[i]).collect();
+            self.ends
+                .insert(self.cells.clone(), EndState { moved, placed });
+        }
+        Ok(())
     }
 
     /// Hard macros in placement order.
@@ -682,6 +814,7 @@ impl CircuitEnv {
             self.cost.placed[i] = false;
         }
         self.cost.recompute();
+        self.cells.clear();
         self.current = 0;
         self.needs_reset = false;
     }
@@ -929,19 +1062,12 @@ impl Env for CircuitEnv {
         }
         let node = self.order[self.current];
         self.cost.place_at_cell(node, cell);
+        self.cells.push(cell as u32);
         self.current += 1;
         out.info.clear();
         out.truncated = false;
         if self.current == self.order.len() {
-            match self.config.std_cell_placer {
-                StdCellPlacer::Fd => {
-                    place_std_cells(&mut self.cost, &self.config.fd_schedule, &mut self.fd);
-                }
-                StdCellPlacer::DreamPlace => {
-                    self.place_analytically(MovableMacros::None)?;
-                }
-                StdCellPlacer::None => {}
-            }
+            self.place_end(MovableMacros::None)?;
             self.finish(out, false);
             self.needs_reset = true;
             self.write_obs(&mut out.observation);
@@ -954,7 +1080,7 @@ impl Env for CircuitEnv {
         } else if self.config.std_cell_placer == StdCellPlacer::DreamPlace {
             // circuit_training's DREAMPlace mode: the remaining hard macros are placed with
             // the soft macros and standard cells (mixed-size), and the real cost is the reward.
-            self.place_analytically(MovableMacros::Unplaced)?;
+            self.place_end(MovableMacros::Unplaced)?;
             self.finish(out, true);
             self.current = self.order.len();
             if self.config.infeasible_auto_reset {

@@ -308,3 +308,68 @@ fn infeasible_reward_is_below_feasible_placements_with_an_a2perf_switch() {
         .to_string();
     assert!(err.contains("infeasible_reward"), "{err}");
 }
+
+/// A repeated episode's end is restored from the environment's cache of placed ends: its
+/// reward and info must be bit-identical to placing it afresh (a new environment per episode),
+/// for both placers, feasible and infeasible ends alike.
+#[test]
+fn repeated_episode_ends_equal_fresh_placements() {
+    let reg = registry();
+    for placer in ["fd", "dreamplace"] {
+        let extra = [("std_cell_placer", Value::Str(placer.into()))];
+        let mut env = coarse_small(&reg, &extra);
+        let space = env.spec().action_space.clone();
+        // Eight random episodes, then the same eight again in reverse order.
+        let mut episodes: Vec<Vec<usize>> = Vec::new();
+        for seed in 0..8u64 {
+            let mut rng = RngStream::new(seed, "test/end-cache");
+            let mut obs = env.reset(Some(seed)).unwrap();
+            let mut actions = Vec::new();
+            loop {
+                let Some(Action::Discrete(a)) = space.sample(&mut rng, obs.action_mask.as_deref())
+                else {
+                    panic!("a legal action while the episode runs");
+                };
+                actions.push(a);
+                let step = env.step(&Action::Discrete(a)).unwrap();
+                if step.done() {
+                    break;
+                }
+                obs = step.observation;
+            }
+            episodes.push(actions);
+        }
+        let again: Vec<Vec<usize>> = episodes.iter().rev().cloned().collect();
+        episodes.extend(again);
+        let end = |env: &mut dyn Env, actions: &[usize]| {
+            env.reset(Some(0)).unwrap();
+            for &a in actions {
+                let step = env.step(&Action::Discrete(a)).unwrap();
+                if step.done() {
+                    let mut info: Vec<(String, u64)> = step
+                        .info
+                        .iter()
+                        .map(|(k, v)| (k.to_string(), v.to_bits()))
+                        .collect();
+                    info.sort();
+                    return (step.reward.to_bits(), info);
+                }
+            }
+            panic!("the episode did not end");
+        };
+        let mut infeasible_ends = 0;
+        for actions in &episodes {
+            let cached = end(env.as_mut(), actions);
+            let mut fresh_env = coarse_small(&reg, &extra);
+            let fresh = end(fresh_env.as_mut(), actions);
+            assert_eq!(cached, fresh, "{placer}: episode {actions:?}");
+            infeasible_ends +=
+                usize::from(cached.1.contains(&("infeasible".into(), 1f64.to_bits())));
+        }
+        // Random placements on the coarse grid strand a macro now and then.
+        println!(
+            "{placer}: {infeasible_ends} of {} ends infeasible",
+            episodes.len()
+        );
+    }
+}
