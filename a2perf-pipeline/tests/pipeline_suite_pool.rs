@@ -344,3 +344,77 @@ fn a_failing_source_run_stops_the_offline_entry_and_no_other_run() {
         );
     }
 }
+
+#[test]
+fn a_cancel_starts_nothing_more_and_a_rerun_finishes_the_suite() {
+    let reg = registry();
+    let tmp = tempfile::tempdir().unwrap();
+    // `a`'s first run waits for `go`, which the test writes only after it has cancelled.
+    let go = tmp.path().join("go");
+    let a = format!(
+        r#"(config: "online.ron", set: ["name=a", "algorithm.name=gated_search",
+            "algorithm.wait_for={}"])"#,
+        go.display()
+    );
+    let entries = [
+        OFFLINE_FROM_AB,
+        &a,
+        r#"(config: "online.ron", set: ["name=b"])"#,
+    ];
+    let plans = plans(&common::dataset_suite(tmp.path(), &entries), &reg);
+    let opts = TrainOptions {
+        jobs: 1,
+        meters: common::test_meters(),
+        ..Default::default()
+    };
+    let mut started = Vec::new();
+    let mut summary = None;
+    let err = train_with_datasets(&reg, &plans, &opts, &mut |e| match e {
+        RunEvent::Started(t) => {
+            started.push(t.clone());
+            opts.cancel.cancel();
+            std::fs::write(&go, b"").unwrap();
+        }
+        RunEvent::Trained(s) => summary = Some(s.clone()),
+        _ => {}
+    })
+    .unwrap_err();
+    assert!(
+        matches!(err, a2perf_pipeline::PipelineError::Cancelled),
+        "{err}"
+    );
+    let first = plan(&plans, "a").run_dir(0);
+    assert_eq!(started, [TrainTask::Run(first.clone())]);
+    let summary = summary.unwrap();
+    assert_eq!(summary.runs.len(), 6);
+    assert!(
+        summary
+            .runs
+            .iter()
+            .all(|(_, o)| *o == a2perf_pipeline::RunOutcome::Cancelled),
+        "{summary:?}"
+    );
+    let offline = plan(&plans, "offline");
+    let source = offline.dataset_from.as_ref().unwrap();
+    assert!(!source.samples.exists() && !offline.run_dir(0).exists());
+
+    // A rerun trains everything, collects the dataset and trains on it.
+    let opts = TrainOptions {
+        cancel: a2perf_core::CancelToken::new(),
+        ..opts
+    };
+    let mut summary = None;
+    train_with_datasets(&reg, &plans, &opts, &mut |e| {
+        if let RunEvent::Trained(s) = e {
+            summary = Some(s.clone());
+        }
+    })
+    .unwrap();
+    let summary = summary.unwrap();
+    assert_eq!(
+        summary.with(&a2perf_pipeline::RunOutcome::Completed).len(),
+        6
+    );
+    assert!(source.samples.is_file() && offline.run_dir(1).join("policy.ckpt").is_file());
+    assert!(first.join("policy.ckpt").is_file());
+}
