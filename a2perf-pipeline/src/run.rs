@@ -475,7 +475,9 @@ pub fn train_with_datasets(
 /// directory.
 ///
 /// Training is [`train_with_datasets`]: an experiment whose dataset comes from other experiments
-/// of the suite is trained after them.
+/// of the suite is trained after them, in the same pool. Inference and generalization run one run
+/// at a time in this process, whose meters measure the whole process, and `opts.jobs` runs at
+/// once under [`Isolation::Children`], each in a child process of its own.
 pub fn run_experiments(
     registry: &Registry,
     plans: &[ExperimentPlan],
