@@ -367,6 +367,7 @@ fn print_train_summary(summary: &pipeline::TrainSummary) {
     let skipped = summary.with(&pipeline::RunOutcome::Skipped).len();
     let cancelled = summary.with(&pipeline::RunOutcome::Cancelled).len();
     let failed = summary.failures().len();
+    let blocked = summary.blocked().len();
     let locked = summary.locked();
     for run in &locked {
         eprintln!("{run}");
@@ -375,9 +376,13 @@ fn print_train_summary(summary: &pipeline::TrainSummary) {
         0 => String::new(),
         n => format!(", {n} left to the other trainer that holds them"),
     };
+    let blocked_note = match blocked {
+        0 => String::new(),
+        n => format!(", {n} not started (what they train on did not come to be)"),
+    };
     eprintln!(
         "train: {done} trained, {skipped} already complete, {cancelled} interrupted (rerun to \
-         continue), {failed} failed{locked_note}"
+         continue), {failed} failed{blocked_note}{locked_note}"
     );
 }
 
@@ -425,16 +430,7 @@ pub fn train(registry: &Registry, args: &TrainArgs) -> Result<()> {
             show_progress: !args.quiet,
             isolation,
         };
-        pipeline::run::train_with_datasets(
-            registry,
-            &loaded.plans,
-            &opts,
-            &mut |event| match event {
-                pipeline::RunEvent::Phase(name) => eprintln!("== {name}"),
-                pipeline::RunEvent::Trained(summary) => print_train_summary(summary),
-                _ => {}
-            },
-        )?;
+        pipeline::run::train_with_datasets(registry, &loaded.plans, &opts, &mut print_event)?;
         return Ok(());
     }
     train_plans(
@@ -646,14 +642,25 @@ pub fn run(registry: &Registry, args: &RunArgs) -> Result<()> {
             args.preempt_grace,
         )?,
     };
-    pipeline::run_experiments(registry, &loaded.plans, &opts, &mut |event| match event {
+    pipeline::run_experiments(registry, &loaded.plans, &opts, &mut print_event)?;
+    Ok(())
+}
+
+/// What `a2perf run` and `a2perf train` (of a suite with dataset steps) print as the pipeline
+/// goes: phases, each dataset collection as it starts (runs go by on the progress bar), and
+/// results.
+fn print_event(event: pipeline::RunEvent<'_>) {
+    match event {
         pipeline::RunEvent::Phase(name) => eprintln!("== {name}"),
+        pipeline::RunEvent::Started(task @ pipeline::run::TrainTask::Collect(_)) => {
+            eprintln!("{task}")
+        }
+        pipeline::RunEvent::Started(_) | pipeline::RunEvent::Finished(_) => {}
         pipeline::RunEvent::Trained(summary) => print_train_summary(summary),
         pipeline::RunEvent::Inferred(dir, r) => print_inference(dir, r),
         pipeline::RunEvent::Generalized(dir, r) => print_generalization(dir, r),
         pipeline::RunEvent::Reported(out, report) => print_report(out, report),
-    })?;
-    Ok(())
+    }
 }
 
 /// `a2perf collect`.

@@ -72,6 +72,7 @@ pub mod minari;
 mod outcome;
 pub mod phase;
 pub mod plan;
+mod pool;
 pub mod progress;
 pub mod registry;
 pub mod report;
@@ -95,7 +96,7 @@ pub use plan::{
     InferenceSettings, LoadedPlans, ObservationSource, ProfileRecord, ProfileSwitch, RunJob, Shard,
     Suite, SuiteSource, TaskSpec, check_dir_name, from_experiment, grid, load_plans, parse_seeds,
 };
-pub use run::{RunEvent, RunOptions, expand_runs, run_experiments};
+pub use run::{RunEvent, RunOptions, TrainTask, expand_runs, run_experiments};
 pub use run_dir::{
     CHECKPOINT_DIR, CURVE_CSV, CURVE_JSON, ExternalAgent, GENERALIZATION_FILE, INFERENCE_FILE,
     LoadedRun, OPERATIVE_FILE, POLICY_FILE, PolicySource, RESUME_DIR, RUN_FILE, RUN_FORMAT_VERSION,

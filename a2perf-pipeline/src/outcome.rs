@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{LockHolder, LockedRun};
+use crate::error::{LockHolder, LockedRun, Result};
+use crate::pool::Slot;
 
 /// What happened to one run.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -22,6 +23,10 @@ pub enum RunOutcome {
     /// Left alone: another trainer holds the run directory's training lock (see
     /// [`run_lock`](crate::run_lock)); the holder as it recorded itself.
     Locked(Option<LockHolder>),
+    /// Not started: something it needs (the dataset it trains on, or a run that dataset is
+    /// collected from) did not come to be; the reason names it. The directory is left as it
+    /// was, and a rerun trains the run.
+    Blocked(String),
 }
 
 /// Outcome of [`train`](crate::train::train).
@@ -61,14 +66,54 @@ impl TrainSummary {
             .collect()
     }
 
+    /// Runs not started because something they need did not come to be, and why.
+    pub fn blocked(&self) -> Vec<(&Path, &str)> {
+        self.with_reason(|o| match o {
+            RunOutcome::Blocked(why) => Some(why),
+            _ => None,
+        })
+    }
+
+    /// Adds what the pool did with the run in `dir`: its report, or [`RunOutcome::Blocked`]
+    /// with `blocked_by(task)` as the reason, or [`RunOutcome::Cancelled`] when it never
+    /// started. A run whose training stopped with an error (not a failed run: a problem that
+    /// stops everything) returns that error.
+    pub(crate) fn add(
+        &mut self,
+        dir: PathBuf,
+        slot: Slot<Result<RunReport>>,
+        blocked_by: impl Fn(usize) -> String,
+    ) -> Result<()> {
+        let outcome = match slot {
+            Slot::Done(report) => {
+                let report = report?;
+                if let Some(step) = report.resumed_from {
+                    self.resumed.push((dir.clone(), step));
+                }
+                self.warnings
+                    .extend(report.warnings.into_iter().map(|w| (dir.clone(), w)));
+                report.outcome
+            }
+            Slot::Blocked { by } => RunOutcome::Blocked(blocked_by(by)),
+            Slot::NotRun => RunOutcome::Cancelled,
+        };
+        self.runs.push((dir, outcome));
+        Ok(())
+    }
+
     /// Failed runs and why.
     pub fn failures(&self) -> Vec<(&Path, &str)> {
+        self.with_reason(|o| match o {
+            RunOutcome::Failed(why) => Some(why),
+            _ => None,
+        })
+    }
+
+    /// Runs whose outcome `reason` gives a reason for, with it.
+    fn with_reason(&self, reason: fn(&RunOutcome) -> Option<&String>) -> Vec<(&Path, &str)> {
         self.runs
             .iter()
-            .filter_map(|(p, o)| match o {
-                RunOutcome::Failed(why) => Some((p.as_path(), why.as_str())),
-                _ => None,
-            })
+            .filter_map(|(p, o)| reason(o).map(|why| (p.as_path(), why.as_str())))
             .collect()
     }
 }

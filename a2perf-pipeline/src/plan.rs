@@ -408,7 +408,8 @@ pub struct SuiteEntry {
     #[serde(default)]
     pub set: Vec<String>,
     /// For an offline algorithm (`bc`): the dataset it trains on is collected from other
-    /// experiments of this suite once they are trained (`a2perf run` does it between the two).
+    /// experiments of this suite as soon as their runs are trained (`a2perf run` does it in its
+    /// `--jobs` pool, beside the other runs, and trains this experiment right after).
     #[serde(default)]
     pub dataset: Option<DatasetStep>,
 }

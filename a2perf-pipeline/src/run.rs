@@ -1,15 +1,19 @@
 //! `a2perf run`: train → infer → generalize → report in one call, resumable phase by phase.
 
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use a2perf_core::{CancelToken, Registry};
 
 use crate::error::io_err;
 use crate::isolate::{ChildTask, Isolation};
+use crate::phase::ActiveRun;
 use crate::plan::DatasetSource;
+use crate::pool::{self, Event, Slot};
+use crate::progress;
 use crate::report::{Report, ReportOptions};
 use crate::run_dir::{CHECKPOINT_DIR, DATASET_REQUEST_FILE, POLICY_FILE};
-use crate::train::{MeterFactory, RunReport, TrainOptions, TrainSummary, no_meters};
+use crate::train::{MeterFactory, RunOutcome, RunReport, TrainOptions, TrainSummary, no_meters};
 use crate::{
     ExperimentPlan, GENERALIZATION_FILE, GeneralizationResults, INFERENCE_FILE, InferOptions,
     InferenceResults, LoadedRun, MetricSettings, PipelineError, Result,
@@ -51,8 +55,13 @@ impl Default for RunOptions {
 /// What [`run_experiments`] has just done, for a front end to print.
 #[derive(Debug)]
 pub enum RunEvent<'a> {
-    /// A phase starts (`train`, `collect`, `infer`, `generalize`, `report`).
+    /// A phase starts (`train`, `infer`, `generalize`, `report`).
     Phase(&'static str),
+    /// A task of the training pool started: training a run, or collecting the dataset of an
+    /// experiment as soon as the runs it is collected from are trained.
+    Started(&'a TrainTask),
+    /// A task of the training pool ended (its outcome is in the next [`RunEvent::Trained`]).
+    Finished(&'a TrainTask),
     /// Training of every run finished (or was skipped because complete).
     Trained(&'a TrainSummary),
     /// One run was inferred.
@@ -61,6 +70,30 @@ pub enum RunEvent<'a> {
     Generalized(&'a Path, &'a GeneralizationResults),
     /// The report was written to the directory.
     Reported(&'a Path, &'a Report),
+}
+
+/// A task of the training pool of [`train_with_datasets`], as its [`RunEvent`]s name it.
+///
+/// ```
+/// use a2perf_pipeline::run::TrainTask;
+/// let task = TrainTask::Collect("bc_dog_pace".into());
+/// assert_eq!(task.to_string(), "collect the dataset of `bc_dog_pace`");
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum TrainTask {
+    /// Training the run in this directory.
+    Run(PathBuf),
+    /// Collecting the dataset of the experiment with this name from its source runs.
+    Collect(String),
+}
+
+impl std::fmt::Display for TrainTask {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            TrainTask::Run(dir) => write!(f, "train {}", dir.display()),
+            TrainTask::Collect(name) => write!(f, "collect the dataset of `{name}`"),
+        }
+    }
 }
 
 /// The bootstrap repetitions recorded by the first run below `dirs` (the config's
@@ -81,23 +114,31 @@ pub fn check_trained(summary: &TrainSummary, cancel: &CancelToken) -> Result<()>
     if cancel.is_cancelled() {
         return Err(PipelineError::Cancelled);
     }
-    let failures = summary.failures();
-    if !failures.is_empty() {
-        let list: Vec<String> = failures
+    let listed = |what: &str, runs: Vec<(&Path, &str)>| {
+        let list: Vec<String> = runs
             .iter()
             .map(|(dir, why)| format!("{}: {why}", dir.display()))
             .collect();
-        return Err(PipelineError::Invalid(format!(
-            "{} run(s) failed: {}",
-            failures.len(),
-            list.join("; ")
-        )));
+        format!("{} run(s) {what}: {}", runs.len(), list.join("; "))
+    };
+    let blocked = summary.blocked();
+    let not_started = (!blocked.is_empty()).then(|| listed("not started", blocked));
+    let failures = summary.failures();
+    if !failures.is_empty() {
+        let mut why = listed("failed", failures);
+        if let Some(blocked) = not_started {
+            why = format!("{why}; {blocked}");
+        }
+        return Err(PipelineError::Invalid(why));
     }
     let locked = summary.locked();
     if !locked.is_empty() {
         return Err(PipelineError::Locked(locked));
     }
-    Ok(())
+    match not_started {
+        Some(why) => Err(PipelineError::Invalid(why)),
+        None => Ok(()),
+    }
 }
 
 /// Collects the dataset of an experiment whose suite entry names one (`plan.dataset_from`), from
@@ -226,40 +267,205 @@ pub fn train_run_at(
     crate::train::train_run(registry, &job, opts)
 }
 
-/// Trains every run of `plans`, an experiment whose dataset the suite collects from other
-/// experiments ([`ExperimentPlan::dataset_from`]) in a second stage: first every other run is
-/// trained, then the datasets are collected ([`collect_dataset`]), then those experiments are
-/// trained. Reports each stage through `on_event` (`Trained`, and `Phase("collect")` /
-/// `Phase("train")` between the stages); stops with an error when a run failed or `opts.cancel`
-/// fired.
+/// What a task of [`train_with_datasets`]' pool does.
+#[derive(Clone, Copy)]
+enum Work {
+    /// Trains `jobs[job]`, a run of `plans[plan]`.
+    Run { job: usize, plan: usize },
+    /// Collects the dataset of `plans[plan]`.
+    Collect { plan: usize },
+}
+
+/// The tasks of [`train_with_datasets`] in plan order (before the first run of an experiment
+/// whose suite collects its dataset, that collection), with the tasks each waits for.
+struct Schedule {
+    jobs: Vec<crate::RunJob>,
+    work: Vec<Work>,
+    tasks: Vec<TrainTask>,
+    deps: Vec<Vec<usize>>,
+}
+
+impl Schedule {
+    fn of(plans: &[ExperimentPlan]) -> Self {
+        let jobs = crate::grid(plans, None);
+        let mut s = Schedule {
+            jobs: Vec::with_capacity(jobs.len()),
+            work: Vec::new(),
+            tasks: Vec::new(),
+            deps: Vec::new(),
+        };
+        let mut jobs = jobs.into_iter();
+        let mut run_task = std::collections::BTreeMap::new();
+        let mut collects = Vec::new();
+        for (p, plan) in plans.iter().enumerate() {
+            let collect = plan.dataset_from.as_ref().map(|source| {
+                collects.push((s.work.len(), source));
+                s.push(
+                    Work::Collect { plan: p },
+                    TrainTask::Collect(plan.name.clone()),
+                    vec![],
+                )
+            });
+            for job in jobs.by_ref().take(plan.seeds.len()) {
+                let dir = job.plan.run_dir(job.seed);
+                run_task.insert(dir.clone(), s.work.len());
+                let work = Work::Run {
+                    job: s.jobs.len(),
+                    plan: p,
+                };
+                s.jobs.push(job);
+                s.push(work, TrainTask::Run(dir), collect.into_iter().collect());
+            }
+        }
+        // A source run outside `plans` is not waited for: collecting checks that it is complete.
+        for (task, source) in collects {
+            s.deps[task] = source
+                .runs
+                .iter()
+                .filter_map(|r| run_task.get(r).copied())
+                .collect();
+        }
+        s
+    }
+
+    fn push(&mut self, work: Work, task: TrainTask, deps: Vec<usize>) -> usize {
+        self.work.push(work);
+        self.tasks.push(task);
+        self.deps.push(deps);
+        self.work.len() - 1
+    }
+
+    /// Why a task that waited for task `by` (which did not succeed) did not start.
+    fn blocked_by(&self, by: usize) -> String {
+        match &self.tasks[by] {
+            TrainTask::Run(dir) => format!(
+                "not trained: the dataset it trains on is collected from {}, which did not \
+                 complete",
+                dir.display()
+            ),
+            TrainTask::Collect(name) => {
+                format!("not trained: collecting the dataset of `{name}` failed")
+            }
+        }
+    }
+}
+
+/// What a task of [`train_with_datasets`]' pool produced.
+enum Done {
+    Run(Result<RunReport>),
+    Collect(Result<()>),
+}
+
+impl Done {
+    /// Whether the tasks waiting for this one may start: a trained (or already complete) run, a
+    /// collected dataset.
+    fn succeeded(&self) -> bool {
+        match self {
+            Done::Run(Ok(r)) => matches!(r.outcome, RunOutcome::Completed | RunOutcome::Skipped),
+            Done::Collect(r) => r.is_ok(),
+            Done::Run(Err(_)) => false,
+        }
+    }
+}
+
+/// Trains every run of `plans` in one pool of `opts.jobs` workers, with the datasets of
+/// experiments that train on one their suite collects ([`ExperimentPlan::dataset_from`]): each
+/// such dataset is collected ([`collect_dataset`]) in the pool as soon as the runs it is
+/// collected from are trained, while other runs go on training, and its experiment's runs train
+/// right after. Reports each task as it starts and ends ([`RunEvent::Started`],
+/// [`RunEvent::Finished`]) and then the whole training ([`RunEvent::Trained`]); stops with an
+/// error when a run failed (naming it, and the runs that could not start without it), a dataset
+/// could not be collected, or `opts.cancel` fired. Runs that do not depend on a failure are
+/// trained all the same.
 pub fn train_with_datasets(
     registry: &Registry,
     plans: &[ExperimentPlan],
     opts: &TrainOptions,
     on_event: &mut dyn FnMut(RunEvent<'_>),
 ) -> Result<()> {
-    let (direct, dependent): (Vec<ExperimentPlan>, Vec<ExperimentPlan>) = plans
-        .iter()
-        .cloned()
-        .partition(|p| p.dataset_from.is_none());
-    let summary = crate::train(registry, &crate::grid(&direct, None), opts)?;
-    on_event(RunEvent::Trained(&summary));
-    check_trained(&summary, &opts.cancel)?;
-    if dependent.is_empty() {
-        return Ok(());
-    }
-    on_event(RunEvent::Phase("collect"));
-    let mut ready = Vec::with_capacity(dependent.len());
-    for mut plan in dependent {
-        if opts.cancel.is_cancelled() {
-            return Err(PipelineError::Cancelled);
+    let s = Schedule::of(plans);
+    crate::train::preflight(registry, &s.jobs)?;
+    let collected: Vec<OnceLock<ExperimentPlan>> = plans.iter().map(|_| OnceLock::new()).collect();
+    let work = |i: usize| match s.work[i] {
+        Work::Run { job, plan } => {
+            let with_dataset;
+            let job = match collected[plan].get() {
+                Some(attached) => {
+                    with_dataset = crate::RunJob {
+                        plan: attached.clone(),
+                        ..s.jobs[job].clone()
+                    };
+                    &with_dataset
+                }
+                None => &s.jobs[job],
+            };
+            Done::Run(crate::train::train_job(registry, job, opts))
         }
-        collect_dataset(registry, &mut plan, opts.show_progress)?;
-        ready.push(plan);
+        Work::Collect { plan: p } => {
+            // Collection shares the process with the runs training beside it.
+            let _active = ActiveRun::enter();
+            let mut plan = plans[p].clone();
+            // Its bars would fight the pool's; the pool's names the collection.
+            let r = collect_dataset(registry, &mut plan, false);
+            if r.is_ok() {
+                let _ = collected[p].set(plan);
+            }
+            Done::Collect(r)
+        }
+    };
+    let bar = progress::bar(s.tasks.len() as u64, "train", opts.show_progress);
+    let slots = pool::run(
+        &s.deps,
+        pool::workers(opts.jobs),
+        &opts.cancel,
+        &work,
+        &Done::succeeded,
+        &mut |event| {
+            let (Event::Started(i) | Event::Finished(i)) = event;
+            let task = &s.tasks[i];
+            match event {
+                Event::Started(_) => {
+                    bar.set_message(match task {
+                        TrainTask::Run(dir) => crate::train::run_name(dir),
+                        TrainTask::Collect(name) => format!("collect {name}"),
+                    });
+                    bar.suspend(|| on_event(RunEvent::Started(task)));
+                }
+                Event::Finished(_) => {
+                    bar.inc(1);
+                    bar.suspend(|| on_event(RunEvent::Finished(task)));
+                }
+            }
+        },
+    );
+    bar.finish_and_clear();
+    let mut summary = TrainSummary::default();
+    let mut first_error = None;
+    for (slot, task) in slots.into_iter().zip(&s.tasks) {
+        let run = match slot {
+            Slot::Done(Done::Run(r)) => Slot::Done(r),
+            Slot::Done(Done::Collect(r)) => {
+                if let Err(e) = r {
+                    first_error.get_or_insert(e);
+                }
+                continue;
+            }
+            Slot::Blocked { by } => Slot::Blocked { by },
+            Slot::NotRun => Slot::NotRun,
+        };
+        if let TrainTask::Run(dir) = task
+            && let Err(e) = summary.add(dir.clone(), run, |by| s.blocked_by(by))
+        {
+            first_error.get_or_insert(e);
+        }
     }
-    on_event(RunEvent::Phase("train"));
-    let summary = crate::train(registry, &crate::grid(&ready, None), opts)?;
     on_event(RunEvent::Trained(&summary));
+    if opts.cancel.is_cancelled() {
+        return Err(PipelineError::Cancelled);
+    }
+    if let Some(e) = first_error {
+        return Err(e);
+    }
     check_trained(&summary, &opts.cancel)
 }
 
@@ -269,7 +475,9 @@ pub fn train_with_datasets(
 /// directory.
 ///
 /// Training is [`train_with_datasets`]: an experiment whose dataset comes from other experiments
-/// of the suite is trained after them.
+/// of the suite is trained after them, in the same pool. Inference and generalization run one run
+/// at a time in this process, whose meters measure the whole process, and `opts.jobs` runs at
+/// once under [`Isolation::Children`], each in a child process of its own.
 pub fn run_experiments(
     registry: &Registry,
     plans: &[ExperimentPlan],
@@ -308,13 +516,13 @@ pub fn run_experiments(
     // and every run's figures stay its own.
     let workers = match &opts.isolation {
         Isolation::InProcess => 1,
-        Isolation::Children(_) => resolve_jobs(opts.jobs),
+        Isolation::Children(_) => pool::workers(opts.jobs),
     };
     let todo: Vec<&PathBuf> = runs
         .iter()
         .filter(|d| !d.join(INFERENCE_FILE).is_file())
         .collect();
-    let inferred = pooled(&todo, workers, cancel, |dir| match &opts.isolation {
+    let inferred = each_run(&todo, workers, cancel, |dir| match &opts.isolation {
         Isolation::InProcess => crate::infer_run(registry, dir, &infer_opts),
         Isolation::Children(command) => {
             crate::isolate::phase_in_child(command, ChildTask::Infer { run: dir }, cancel)?;
@@ -330,7 +538,7 @@ pub fn run_experiments(
         .iter()
         .filter(|d| !d.join(GENERALIZATION_FILE).is_file())
         .collect();
-    let generalized = pooled(&todo, workers, cancel, |dir| match &opts.isolation {
+    let generalized = each_run(&todo, workers, cancel, |dir| match &opts.isolation {
         Isolation::InProcess => crate::generalize_run(registry, dir, None, opts.show_progress),
         Isolation::Children(command) => {
             crate::isolate::phase_in_child(command, ChildTask::Generalize { run: dir }, cancel)?;
@@ -355,53 +563,29 @@ pub fn run_experiments(
     Ok(out)
 }
 
-/// Worker threads for `jobs` (0 = one per logical CPU).
-fn resolve_jobs(jobs: usize) -> usize {
-    match jobs {
-        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
-        n => n,
-    }
-}
-
-/// `phase` of every run of `dirs`, on up to `workers` threads, results in the order of `dirs`.
-/// Every run is attempted (until a cancel); the first error in that order is returned, so that
-/// one failing run does not lose the results of the others already written.
-fn pooled<T: Send>(
+/// `phase` of every run of `dirs`, in the pool on up to `workers` threads, results in the
+/// order of `dirs`. Every run is attempted (until a cancel); the first error in that order is
+/// returned, so that one failing run does not lose the results of the others already written.
+fn each_run<T: Send>(
     dirs: &[&PathBuf],
     workers: usize,
     cancel: &CancelToken,
     phase: impl Fn(&Path) -> Result<T> + Sync,
 ) -> Result<Vec<T>> {
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let slots: Vec<std::sync::Mutex<Option<Result<T>>>> =
-        dirs.iter().map(|_| std::sync::Mutex::new(None)).collect();
-    std::thread::scope(|scope| {
-        for _ in 0..workers.clamp(1, dirs.len().max(1)) {
-            scope.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-                    let Some(dir) = dirs.get(i) else { break };
-                    let r = if cancel.is_cancelled() {
-                        Err(PipelineError::Cancelled)
-                    } else {
-                        phase(dir)
-                    };
-                    if let Ok(mut slot) = slots[i].lock() {
-                        *slot = Some(r);
-                    }
-                }
-            });
-        }
-    });
-    slots
-        .into_iter()
-        .map(|s| {
-            s.into_inner()
-                .ok()
-                .flatten()
-                .unwrap_or_else(|| Err(PipelineError::Invalid("a worker thread panicked".into())))
-        })
-        .collect()
+    pool::run(
+        &vec![Vec::new(); dirs.len()],
+        workers,
+        cancel,
+        &|i| phase(dirs[i]),
+        &|_| true,
+        &mut |_| {},
+    )
+    .into_iter()
+    .map(|slot| match slot {
+        Slot::Done(r) => r,
+        Slot::Blocked { .. } | Slot::NotRun => Err(PipelineError::Cancelled),
+    })
+    .collect()
 }
 
 /// A results file a child process wrote.

@@ -7,9 +7,6 @@
 //! *segment*, recorded in `train_segments.json` with its own system meters; `train_system.json`
 //! combines them (see [`combine_segments`]).
 
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use a2perf_core::{
     CancelToken, DirectoryCheckpoints, Registry, ResumeDir, ResumePoint, RunDir, RunError,
     RunState, TrainingContext, write_atomic, write_json_atomic,
@@ -19,6 +16,7 @@ use crate::error::{PipelineError, Result, io_err};
 use crate::isolate::Isolation;
 use crate::phase::measured;
 use crate::plan::RunJob;
+use crate::pool::{self, Event};
 use crate::progress;
 use crate::run_dir::{
     CHECKPOINT_DIR, POLICY_FILE, PlannedRun, RESUME_DIR, Start, TRAIN_SEGMENTS_FILE, prepare,
@@ -103,71 +101,45 @@ pub fn preflight(registry: &Registry, jobs: &[RunJob]) -> Result<()> {
 /// output); a run that fails is reported in the summary and leaves the others going.
 pub fn train(registry: &Registry, jobs: &[RunJob], opts: &TrainOptions) -> Result<TrainSummary> {
     preflight(registry, jobs)?;
-    let workers = match opts.jobs {
-        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
-        n => n,
-    }
-    .min(jobs.len())
-    .max(1);
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Result<RunReport>>>> =
-        Mutex::new((0..jobs.len()).map(|_| None).collect());
     let bar = progress::bar(jobs.len() as u64, "train", opts.show_progress);
-    std::thread::scope(|scope| {
-        for _ in 0..workers {
-            scope.spawn(|| {
-                loop {
-                    if opts.cancel.is_cancelled() {
-                        break;
-                    }
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(job) = jobs.get(i) else { break };
-                    bar.set_message(
-                        job.plan
-                            .run_dir(job.seed)
-                            .file_name()
-                            .map(|n| n.to_string_lossy().into_owned())
-                            .unwrap_or_default(),
-                    );
-                    let r = match &opts.isolation {
-                        Isolation::InProcess => train_run(registry, job, opts),
-                        Isolation::Children(command) => crate::isolate::train_in_child(
-                            command,
-                            &job.plan.run_dir(job.seed),
-                            &opts.cancel,
-                        ),
-                    };
-                    bar.inc(1);
-                    if let Ok(mut slots) = results.lock() {
-                        slots[i] = Some(r);
-                    }
-                }
-            });
-        }
-    });
+    let slots = pool::run(
+        &vec![Vec::new(); jobs.len()],
+        pool::workers(opts.jobs),
+        &opts.cancel,
+        &|i| train_job(registry, &jobs[i], opts),
+        &|_| true,
+        &mut |event| match event {
+            Event::Started(i) => bar.set_message(run_name(&jobs[i].plan.run_dir(jobs[i].seed))),
+            Event::Finished(_) => bar.inc(1),
+        },
+    );
     bar.finish_and_clear();
-    let slots = results
-        .into_inner()
-        .map_err(|_| PipelineError::Invalid("a training thread panicked".into()))?;
     let mut summary = TrainSummary::default();
     for (job, slot) in jobs.iter().zip(slots) {
-        let dir = job.plan.run_dir(job.seed);
-        match slot {
-            Some(Ok(report)) => {
-                if let Some(step) = report.resumed_from {
-                    summary.resumed.push((dir.clone(), step));
-                }
-                summary
-                    .warnings
-                    .extend(report.warnings.into_iter().map(|w| (dir.clone(), w)));
-                summary.runs.push((dir, report.outcome));
-            }
-            Some(Err(e)) => return Err(e),
-            // Never started because of cancellation.
-            None => summary.runs.push((dir, RunOutcome::Cancelled)),
-        }
+        summary.add(job.plan.run_dir(job.seed), slot, |_| String::new())?;
     }
     Ok(summary)
+}
+
+/// The name of a run directory, for progress bars.
+pub(crate) fn run_name(dir: &std::path::Path) -> String {
+    dir.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// Trains one job where `opts.isolation` says: in this process or in a child process.
+pub(crate) fn train_job(
+    registry: &Registry,
+    job: &RunJob,
+    opts: &TrainOptions,
+) -> Result<RunReport> {
+    match &opts.isolation {
+        Isolation::InProcess => train_run(registry, job, opts),
+        Isolation::Children(command) => {
+            crate::isolate::train_in_child(command, &job.plan.run_dir(job.seed), &opts.cancel)
+        }
+    }
 }
 
 /// Trains one job (see [`train`]).

@@ -6,45 +6,20 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use a2perf_core::Value;
-use a2perf_pipeline::{RunEvent, RunOptions, load_plans, run_experiments};
+use a2perf_pipeline::{RunEvent, RunOptions, TrainTask, load_plans, run_experiments};
 
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p
-}
+use common::write;
 
 /// Two online experiments on the corridor and an offline one drawing from both.
 fn suite(dir: &Path, dataset: &str) -> PathBuf {
-    write(
+    common::dataset_suite(
         dir,
-        "online.ron",
-        r#"(env: (id: "Corridor-v0"), algorithm: (name: "random_search"), seeds: [0, 1],
-            training: (total_env_steps: 600, eval_interval: 200, eval_episodes: 2,
-                       checkpoint_interval: 200),
-            inference: (rollouts: 3, timing_samples: 5), generalization: (episodes: 2))"#,
-    );
-    write(
-        dir,
-        "offline.ron",
-        r#"(include: ["online.ron"], name: "offline", algorithm: (name: "toy_bc"))"#,
-    );
-    let out = dir.join("results").display().to_string();
-    write(
-        dir,
-        "suite.ron",
-        &format!(
-            r#"(
-            name: "s",
-            set: ["output.dir={out}"],
-            experiments: [
-                // The offline entry may come first: it is planned after the others.
-                (config: "offline.ron", dataset: {dataset}),
-                (config: "online.ron", set: ["name=a"]),
-                (config: "online.ron", set: ["name=b"]),
-            ],
-        )"#
-        ),
+        &[
+            // The offline entry may come first: it is planned after the others.
+            &format!(r#"(config: "offline.ron", dataset: {dataset})"#),
+            r#"(config: "online.ron", set: ["name=a"])"#,
+            r#"(config: "online.ron", set: ["name=b"])"#,
+        ],
     )
 }
 
@@ -94,15 +69,16 @@ fn a_dataset_step_collects_from_the_suites_runs_and_trains_on_it() {
         meters: common::test_meters(),
         ..Default::default()
     };
-    run_experiments(&reg, &loaded.plans, &opts, &mut |e| {
-        if let RunEvent::Phase(p) = e {
-            phases.push(p)
-        }
+    run_experiments(&reg, &loaded.plans, &opts, &mut |e| match e {
+        RunEvent::Phase(p) => phases.push(p.to_string()),
+        RunEvent::Started(TrainTask::Collect(name)) => phases.push(format!("collect {name}")),
+        _ => {}
     })
     .unwrap();
+    // The dataset is collected in the training pool, once its sources are trained.
     assert_eq!(
         phases,
-        ["train", "collect", "train", "infer", "generalize", "report"]
+        ["train", "collect offline", "infer", "generalize", "report"]
     );
     assert!(source.samples.is_file());
     for seed in [0, 1] {

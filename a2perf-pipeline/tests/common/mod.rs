@@ -45,6 +45,41 @@ pub fn registry() -> Registry {
     reg
 }
 
+/// Writes `text` to `dir/name`.
+pub fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// A suite file in `dir` whose experiments are `entries` (`(config: …)` items) over
+/// `online.ron` (random search on the corridor, seeds 0 and 1, tiny budgets) and `offline.ron`
+/// (the same with `toy_bc`, for an entry with a `dataset` step); results go to `dir/results`.
+pub fn dataset_suite(dir: &Path, entries: &[&str]) -> std::path::PathBuf {
+    write(
+        dir,
+        "online.ron",
+        r#"(env: (id: "Corridor-v0"), algorithm: (name: "random_search"), seeds: [0, 1],
+            training: (total_env_steps: 600, eval_interval: 200, eval_episodes: 2,
+                       checkpoint_interval: 200),
+            inference: (rollouts: 3, timing_samples: 5), generalization: (episodes: 2))"#,
+    );
+    write(
+        dir,
+        "offline.ron",
+        r#"(include: ["online.ron"], name: "offline", algorithm: (name: "toy_bc"))"#,
+    );
+    let out = dir.join("results").display().to_string();
+    write(
+        dir,
+        "suite.ron",
+        &format!(
+            r#"(name: "s", set: ["output.dir={out}"], experiments: [{}])"#,
+            entries.join(",\n")
+        ),
+    )
+}
+
 /// A small plan on the corridor.
 pub fn plan(out: &Path, name: &str, seeds: Vec<u64>) -> ExperimentPlan {
     ExperimentPlan::new(
