@@ -8,7 +8,7 @@ use a2perf_circuit::env::{
     A2PERF_INFEASIBLE_REWARD, FEATURE_DIM, GRID_CHANNELS, INFEASIBLE_REWARD,
 };
 use a2perf_core::{Action, DType, Env, RngStream, Space, Value};
-use common::{coarse_small, infeasible, registry, replay, shared_circuit_dir};
+use common::{coarse_small, random_episode_actions, registry, replay, shared_circuit_dir};
 
 fn random_episode(env: &mut dyn Env, seed: u64) -> (f64, usize, Vec<(String, f64)>) {
     let mut rng = RngStream::new(seed, "test/actions");
@@ -248,29 +248,15 @@ fn infeasible_reward_is_below_feasible_placements_with_an_a2perf_switch() {
             .map(String::as_str),
         Some("-4")
     );
-    let space = env.spec().action_space.clone();
     let (mut infeasible_run, mut worst_feasible) = (None, f64::INFINITY);
     for seed in 0..200u64 {
-        let mut rng = RngStream::new(seed, "test/infeasible");
-        let mut obs = env.reset(Some(seed)).unwrap();
-        let mut actions = Vec::new();
-        loop {
-            let Some(Action::Discrete(a)) = space.sample(&mut rng, obs.action_mask.as_deref())
-            else {
-                panic!("a legal action while the episode runs");
-            };
-            actions.push(a);
-            let step = env.step(&Action::Discrete(a)).unwrap();
-            if step.done() {
-                if infeasible(&step.info) {
-                    assert_eq!(step.reward, INFEASIBLE_REWARD);
-                    infeasible_run.get_or_insert((seed, actions.clone()));
-                } else {
-                    worst_feasible = worst_feasible.min(step.reward);
-                }
-                break;
-            }
-            obs = step.observation;
+        let (actions, reward, stranded) =
+            random_episode_actions(env.as_mut(), seed, "test/infeasible");
+        if stranded {
+            assert_eq!(reward, INFEASIBLE_REWARD);
+            infeasible_run.get_or_insert((seed, actions));
+        } else {
+            worst_feasible = worst_feasible.min(reward);
         }
     }
     let (seed, actions) = infeasible_run.expect("an infeasible episode in 200 random ones");
@@ -318,27 +304,10 @@ fn repeated_episode_ends_equal_fresh_placements() {
     for placer in ["fd", "dreamplace"] {
         let extra = [("std_cell_placer", Value::Str(placer.into()))];
         let mut env = coarse_small(&reg, &extra);
-        let space = env.spec().action_space.clone();
         // Eight random episodes, then the same eight again in reverse order.
-        let mut episodes: Vec<Vec<usize>> = Vec::new();
-        for seed in 0..8u64 {
-            let mut rng = RngStream::new(seed, "test/end-cache");
-            let mut obs = env.reset(Some(seed)).unwrap();
-            let mut actions = Vec::new();
-            loop {
-                let Some(Action::Discrete(a)) = space.sample(&mut rng, obs.action_mask.as_deref())
-                else {
-                    panic!("a legal action while the episode runs");
-                };
-                actions.push(a);
-                let step = env.step(&Action::Discrete(a)).unwrap();
-                if step.done() {
-                    break;
-                }
-                obs = step.observation;
-            }
-            episodes.push(actions);
-        }
+        let mut episodes: Vec<Vec<usize>> = (0..8u64)
+            .map(|seed| random_episode_actions(env.as_mut(), seed, "test/end-cache").0)
+            .collect();
         let again: Vec<Vec<usize>> = episodes.iter().rev().cloned().collect();
         episodes.extend(again);
         let end = |env: &mut dyn Env, actions: &[usize]| {

@@ -44,31 +44,39 @@ pub fn infeasible(info: &a2perf_core::Info) -> bool {
     info.get("infeasible") == Some(1.0)
 }
 
+/// One episode of random legal actions from a reset (actions drawn from the stream
+/// `(seed, stream)`): the actions, the final reward and whether the end was infeasible.
+pub fn random_episode_actions(
+    env: &mut dyn Env,
+    seed: u64,
+    stream: &str,
+) -> (Vec<usize>, f64, bool) {
+    let space = env.spec().action_space.clone();
+    let mut rng = RngStream::new(seed, stream);
+    let mut obs = env.reset(Some(seed)).unwrap();
+    let mut actions = Vec::new();
+    loop {
+        let Some(Action::Discrete(a)) = space.sample(&mut rng, obs.action_mask.as_deref()) else {
+            panic!("a legal action while the episode runs");
+        };
+        actions.push(a);
+        let step = env.step(&Action::Discrete(a)).unwrap();
+        if step.done() {
+            return (actions, step.reward, infeasible(&step.info));
+        }
+        obs = step.observation;
+    }
+}
+
 /// Random legal episodes (episode seeds `0..200`) until one strands a macro; returns its seed and
 /// actions. The environment must be able to strand one (e.g. a coarse grid).
 pub fn find_infeasible_episode(env: &mut dyn Env) -> (u64, Vec<usize>) {
-    let space = env.spec().action_space.clone();
-    for seed in 0..200u64 {
-        let mut rng = RngStream::new(seed, "test/infeasible");
-        let mut obs = env.reset(Some(seed)).unwrap();
-        let mut actions = Vec::new();
-        loop {
-            let Some(Action::Discrete(a)) = space.sample(&mut rng, obs.action_mask.as_deref())
-            else {
-                panic!("a legal action while the episode runs");
-            };
-            actions.push(a);
-            let step = env.step(&Action::Discrete(a)).unwrap();
-            if step.done() {
-                if infeasible(&step.info) {
-                    return (seed, actions);
-                }
-                break;
-            }
-            obs = step.observation;
-        }
-    }
-    panic!("no infeasible episode in 200 random ones");
+    (0..200u64)
+        .find_map(|seed| {
+            let (actions, _, stranded) = random_episode_actions(env, seed, "test/infeasible");
+            stranded.then_some((seed, actions))
+        })
+        .expect("an infeasible episode in 200 random ones")
 }
 
 /// Synthetic-Small on a coarser 12×12 grid (instead of 16×16): fewer legal cells, so some random
