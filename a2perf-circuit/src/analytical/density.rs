@@ -42,8 +42,11 @@ pub struct Electrostatics {
     /// Potential of the current evaluation.
     psi: Vec<f64>,
     transposed: Vec<f64>,
+    /// Every movable object's smoothed shares of the bins in x and in y (see
+    /// [`smooth_weights`]), computed once per evaluation for the deposit and the gradient.
     wx: Vec<f64>,
     wy: Vec<f64>,
+    foot: Vec<Footprint>,
     dx: Vec<f64>,
     dy: Vec<f64>,
 }
@@ -80,6 +83,18 @@ pub struct DensityStats {
     pub overflow_area: f64,
     /// Largest bin charge over the bin area.
     pub max_density: f64,
+}
+
+/// Where a movable object's shares lie: columns `c0..c0 + cw` (at `ox` in the x shares), rows
+/// `r0..r0 + rw` (at `oy` in the y shares); `cw == 0` for an object outside the canvas.
+#[derive(Clone, Copy, Debug, Default)]
+struct Footprint {
+    c0: usize,
+    cw: usize,
+    r0: usize,
+    rw: usize,
+    ox: usize,
+    oy: usize,
 }
 
 /// Columns (or rows) `[lo, hi]` of bins of size `b` overlapped by `[a0, a1]`, clamped to `n`
@@ -149,8 +164,9 @@ impl Electrostatics {
             map: vec![0.0; nx * ny],
             psi: vec![0.0; nx * ny],
             transposed: vec![0.0; nx * ny],
-            wx: vec![0.0; nx],
-            wy: vec![0.0; ny],
+            wx: Vec::new(),
+            wy: Vec::new(),
+            foot: Vec::new(),
             dx: vec![0.0; nx],
             dy: vec![0.0; ny],
         }
@@ -218,11 +234,40 @@ impl Electrostatics {
     ) -> DensityStats {
         let (bx, by) = (self.bx, self.by);
         self.map.copy_from_slice(&self.fixed);
+        self.wx.clear();
+        self.wy.clear();
+        self.foot.clear();
         for (p, c) in pos.iter().zip(charges) {
-            self.deposit_smooth(
-                [p[0] - c.hw, p[1] - c.hh, p[0] + c.hw, p[1] + c.hh],
-                c.ratio,
+            let (ox, oy) = (self.wx.len(), self.wy.len());
+            let f = smooth_weights(p[0] - c.hw, p[0] + c.hw, bx, self.nx, &mut self.wx).and_then(
+                |(c0, cw)| {
+                    let (r0, rw) =
+                        smooth_weights(p[1] - c.hh, p[1] + c.hh, by, self.ny, &mut self.wy)?;
+                    Some(Footprint {
+                        c0,
+                        cw,
+                        r0,
+                        rw,
+                        ox,
+                        oy,
+                    })
+                },
             );
+            let Some(f) = f else {
+                // Outside the canvas: no charge, no gradient.
+                self.wx.truncate(ox);
+                self.foot.push(Footprint::default());
+                continue;
+            };
+            let (wx, wy) = (&self.wx[ox..ox + f.cw], &self.wy[oy..oy + f.rw]);
+            for (r, &wy) in (f.r0..f.r0 + f.rw).zip(wy) {
+                let base = r * self.nx + f.c0;
+                let wy = c.ratio * wy;
+                for (m, &wx) in self.map[base..base + f.cw].iter_mut().zip(wx) {
+                    *m += wy * wx;
+                }
+            }
+            self.foot.push(f);
         }
         self.solve();
         let energy = 0.5
@@ -238,8 +283,9 @@ impl Electrostatics {
             overflow_area += (q - cap).max(0.0);
             max_q = max_q.max(q);
         }
-        for ((p, c), g) in pos.iter().zip(charges).zip(grad.iter_mut()) {
+        for (((p, c), g), k) in pos.iter().zip(charges).zip(grad.iter_mut()).zip(0..) {
             *g = self.rect_gradient(
+                k,
                 [p[0] - c.hw, p[1] - c.hh, p[0] + c.hw, p[1] + c.hh],
                 c.ratio,
             );
@@ -251,47 +297,27 @@ impl Electrostatics {
         }
     }
 
-    /// Adds a movable rectangle's smoothed charge (see [`smooth_weights`]).
-    fn deposit_smooth(&mut self, [x0, y0, x1, y1]: [f64; 4], ratio: f64) {
-        let (nx, ny) = (self.nx, self.ny);
-        let Some((c0, cw)) = smooth_weights(x0, x1, self.bx, nx, &mut self.wx) else {
-            return;
-        };
-        let Some((r0, rw)) = smooth_weights(y0, y1, self.by, ny, &mut self.wy) else {
-            return;
-        };
-        for (r, &wy) in (r0..r0 + rw).zip(&self.wy[..rw]) {
-            let base = r * nx;
-            let wy = ratio * wy;
-            for (m, &wx) in self.map[base + c0..base + c0 + cw]
-                .iter_mut()
-                .zip(&self.wx[..cw])
-            {
-                *m += wy * wx;
-            }
+    /// `(∂E/∂x, ∂E/∂y)` of movable object `k`'s smoothed charge (rectangle
+    /// `[x0, y0, x1, y1]`) with the current potential.
+    fn rect_gradient(&mut self, k: usize, [x0, y0, x1, y1]: [f64; 4], ratio: f64) -> [f64; 2] {
+        let f = self.foot[k];
+        if f.cw == 0 {
+            return [0.0, 0.0];
         }
-    }
-
-    /// `(∂E/∂x, ∂E/∂y)` of a movable rectangle's smoothed charge with the current potential.
-    fn rect_gradient(&mut self, [x0, y0, x1, y1]: [f64; 4], ratio: f64) -> [f64; 2] {
         let nx = self.nx;
-        let Some((c0, cw)) = smooth_weights(x0, x1, self.bx, nx, &mut self.wx) else {
-            return [0.0, 0.0];
-        };
-        let Some((r0, rw)) = smooth_weights(y0, y1, self.by, self.ny, &mut self.wy) else {
-            return [0.0, 0.0];
-        };
-        smooth_slopes(x0, x1, self.bx, c0, cw, &mut self.dx);
-        smooth_slopes(y0, y1, self.by, r0, rw, &mut self.dy);
+        let (wx, wy) = (&self.wx[f.ox..f.ox + f.cw], &self.wy[f.oy..f.oy + f.rw]);
+        smooth_slopes(x0, x1, self.bx, f.c0, f.cw, &mut self.dx);
+        smooth_slopes(y0, y1, self.by, f.r0, f.rw, &mut self.dy);
         let mut g = [0.0, 0.0];
-        for r in 0..rw {
-            let row = &self.psi[(r0 + r) * nx + c0..(r0 + r) * nx + c0 + cw];
+        for r in 0..f.rw {
+            let base = (f.r0 + r) * nx + f.c0;
+            let row = &self.psi[base..base + f.cw];
             let (mut sx, mut s) = (0.0, 0.0);
-            for ((p, wx), dx) in row.iter().zip(&self.wx[..cw]).zip(&self.dx[..cw]) {
+            for ((p, wx), dx) in row.iter().zip(wx).zip(&self.dx[..f.cw]) {
                 sx += dx * p;
                 s += wx * p;
             }
-            g[0] += self.wy[r] * sx;
+            g[0] += wy[r] * sx;
             g[1] += self.dy[r] * s;
         }
         [ratio * g[0], ratio * g[1]]
@@ -352,15 +378,21 @@ fn tent_integral(d: f64, b: f64) -> f64 {
 /// Share of a movable interval `[a0, a1]` in each bin of size `b` after smoothing it with a
 /// box one bin wide (cloud-in-cell): `(1/b)·∫ |bin ∩ [s − b/2, s + b/2]| ds` over the
 /// interval, which is a C¹ function of the interval's position, so the energy's gradient is
-/// continuous. Writes the bins' shares into `out[..len]` and returns `(first bin, len)`.
+/// continuous. Appends the bins' shares to `out` and returns `(first bin, len)`.
 #[inline]
-fn smooth_weights(a0: f64, a1: f64, b: f64, n: usize, out: &mut [f64]) -> Option<(usize, usize)> {
+fn smooth_weights(
+    a0: f64,
+    a1: f64,
+    b: f64,
+    n: usize,
+    out: &mut Vec<f64>,
+) -> Option<(usize, usize)> {
     let h = b / 2.0;
     let (lo, hi) = span(a0 - h, a1 + h, b, n)?;
-    for (k, i) in (lo..=hi).enumerate() {
+    out.extend((lo..=hi).map(|i| {
         let c = (i as f64 + 0.5) * b;
-        out[k] = (tent_integral(a1 - c, b) - tent_integral(a0 - c, b)) / b;
-    }
+        (tent_integral(a1 - c, b) - tent_integral(a0 - c, b)) / b
+    }));
     Some((lo, hi - lo + 1))
 }
 
