@@ -10,8 +10,8 @@
 //! so it vectorizes; about eight times the throughput of the C library's `exp`, and the same
 //! bits on every x86-64 CPU, which glibc's FMA/non-FMA dispatch does not promise). Two-pin nets,
 //! half of a typical netlist, take the closed form `|Δ|·tanh(|Δ|/2γ)` (one exponential per
-//! axis). Pins of fixed objects read a spare slot (position 0, their offset is their absolute
-//! position) and write a spare gradient slot, so no loop branches on them.
+//! axis). Pins of fixed objects read spare slots (position 0, their offset is their absolute
+//! position) and write spare gradient slots, so no loop branches on them.
 
 /// Pin of a net: a movable object (with an offset from its centre) or a fixed point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -42,7 +42,7 @@ pub struct WaNets {
     groups: Vec<Group>,
     hpwl_only: Vec<u32>,
     built: bool,
-    /// Per axis, positions and gradient of the movable objects plus the spare slot.
+    /// Per axis, positions and gradient of the movable objects plus the spare slots.
     px: Vec<f64>,
     py: Vec<f64>,
     gx: Vec<f64>,
@@ -87,6 +87,12 @@ pub struct WaStats {
     /// Σ w · HPWL over every net.
     pub hpwl: f64,
 }
+
+/// Spare slots of the fixed pins (positions 0, gradients thrown away).
+const SPARE: usize = 16;
+
+/// The interleaving of a group's nets (see `WaNets::build`).
+const STRIDE: usize = 16;
 
 /// Half the widest span, in units of γ, that one shared exponential per pin covers.
 const WIDE: f64 = 700.0;
@@ -253,11 +259,18 @@ impl WaNets {
             }
             by_deg[deg].push(n as u32);
         }
+        let mut fixed_pins = 0usize;
         for (deg, nets) in by_deg.into_iter().enumerate() {
             if nets.is_empty() {
                 continue;
             }
             let k = nets.len();
+            // Nets in netlist order often share their driver, so that consecutive gradient
+            // adds would hit one object, each waiting for the last; interleaved (net `r`, `r +
+            // STRIDE`, …, then `r + 1`, …) they hit different objects.
+            let nets: Vec<u32> = (0..STRIDE.min(k))
+                .flat_map(|r| nets[r..].iter().step_by(STRIDE).copied())
+                .collect();
             let mut g = Group {
                 deg,
                 weight: nets.iter().map(|&n| self.weight[n as usize]).collect(),
@@ -269,7 +282,13 @@ impl WaNets {
                 let a = self.start[n as usize] as usize;
                 for j in 0..deg {
                     let p = &self.pins[a + j];
-                    g.slot[j * k + i] = (p.obj as usize).min(m) as u32;
+                    g.slot[j * k + i] = if p.obj == FIXED {
+                        // Spread over the spare slots, for the same reason.
+                        fixed_pins += 1;
+                        (m + fixed_pins % SPARE) as u32
+                    } else {
+                        p.obj
+                    };
                     g.dx[j * k + i] = p.dx;
                     g.dy[j * k + i] = p.dy;
                 }
@@ -282,20 +301,20 @@ impl WaNets {
     #[inline(always)]
     fn evaluate_generic(&mut self, pos: &[[f64; 2]], gamma: f64, grad: &mut [[f64; 2]]) -> WaStats {
         let m = pos.len();
-        // The spare slot is `m`: a change of the number of objects rebuilds the groups.
-        if !self.built || self.px.len() != m + 1 {
+        // The spare slots start at `m`: a change of the number of objects rebuilds the groups.
+        if !self.built || self.px.len() != m + SPARE {
             self.build(m);
         }
         self.px.clear();
         self.py.clear();
         self.px.extend(pos.iter().map(|p| p[0]));
         self.py.extend(pos.iter().map(|p| p[1]));
-        self.px.push(0.0);
-        self.py.push(0.0);
+        self.px.resize(m + SPARE, 0.0);
+        self.py.resize(m + SPARE, 0.0);
         self.gx.clear();
-        self.gx.resize(m + 1, 0.0);
+        self.gx.resize(m + SPARE, 0.0);
         self.gy.clear();
-        self.gy.resize(m + 1, 0.0);
+        self.gy.resize(m + SPARE, 0.0);
         let inv = 1.0 / gamma;
         let mut stats = WaStats::default();
         self.wide.clear();
