@@ -91,6 +91,28 @@ pub struct DensityStats {
     pub max_density: f64,
 }
 
+/// `(Σ qψ, Σ max(q − cap, 0), max q)` over the bins, each in four lanes so that the pass
+/// vectorizes (and gives the same bits on every build).
+#[inline(always)]
+fn bin_sums(map: &[f64], psi: &[f64], cap: f64) -> ([f64; 4], [f64; 4], [f64; 4]) {
+    let (mut dot, mut over, mut top) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+    let (qs, ps) = (map.chunks_exact(4), psi.chunks_exact(4));
+    let (q_rest, p_rest) = (qs.remainder(), ps.remainder());
+    for (q, p) in qs.zip(ps) {
+        for l in 0..4 {
+            dot[l] += q[l] * p[l];
+            over[l] += if q[l] > cap { q[l] - cap } else { 0.0 };
+            top[l] = if q[l] > top[l] { q[l] } else { top[l] };
+        }
+    }
+    for (l, (&q, &p)) in q_rest.iter().zip(p_rest).enumerate() {
+        dot[l] += q * p;
+        over[l] += if q > cap { q - cap } else { 0.0 };
+        top[l] = if q > top[l] { q } else { top[l] };
+    }
+    (dot, over, top)
+}
+
 /// Where a movable object's shares lie: columns `c0..c0 + cw` (at `ox` in the x shares), rows
 /// `r0..r0 + rw` (at `oy` in the y shares); `cw == 0` for an object outside the canvas.
 #[derive(Clone, Copy, Debug, Default)]
@@ -223,9 +245,20 @@ impl Electrostatics {
         }
     }
 
-    /// Charge map of `pos` (centres) with `charges`, potential, energy and statistics; writes
-    /// `∂E/∂pos` into `grad` (overwritten).
-    pub fn evaluate(
+    vector_builds! {
+        /// Charge map of `pos` (centres) with `charges`, potential, energy and statistics;
+        /// writes `∂E/∂pos` into `grad` (overwritten).
+        pub fn evaluate / evaluate_avx2 / evaluate_avx512 (
+            &mut self,
+            pos: &[[f64; 2]],
+            charges: &[Charge],
+            target_density: f64,
+            grad: &mut [[f64; 2]],
+        ) -> DensityStats = evaluate_generic
+    }
+
+    #[inline(always)]
+    fn evaluate_generic(
         &mut self,
         pos: &[[f64; 2]],
         charges: &[Charge],
@@ -270,22 +303,8 @@ impl Electrostatics {
             self.foot.push(f);
         }
         self.solve();
-        // Four lanes per sum, so that the passes over the bins vectorize.
         let cap = target_density * bx * by;
-        let (mut dot, mut over, mut top) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
-        let (qs, ps) = (self.map.chunks_exact(4), self.psi.chunks_exact(4));
-        let (q_rest, p_rest) = (qs.remainder(), ps.remainder());
-        let mut add = |q: &[f64], p: &[f64]| {
-            for l in 0..q.len() {
-                dot[l] += q[l] * p[l];
-                over[l] += if q[l] > cap { q[l] - cap } else { 0.0 };
-                top[l] = if q[l] > top[l] { q[l] } else { top[l] };
-            }
-        };
-        for (q, p) in qs.zip(ps) {
-            add(q, p);
-        }
-        add(q_rest, p_rest);
+        let (dot, over, top) = bin_sums(&self.map, &self.psi, cap);
         let lanes = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
         let energy = 0.5 * lanes(dot);
         let overflow_area = lanes(over);
@@ -306,6 +325,7 @@ impl Electrostatics {
 
     /// `(∂E/∂x, ∂E/∂y)` of movable object `k`'s smoothed charge (rectangle
     /// `[x0, y0, x1, y1]`) with the current potential.
+    #[inline(always)]
     fn rect_gradient(&mut self, k: usize, [x0, y0, x1, y1]: [f64; 4], ratio: f64) -> [f64; 2] {
         let f = self.foot[k];
         if f.cw == 0 {
@@ -333,11 +353,18 @@ impl Electrostatics {
     /// `psi = G · map`: DCT-II along x then y, the division by the eigenvalues, DCT-III along
     /// y then x. Each pass transforms the rows two at a time, packed as one complex FFT, and
     /// the passes along x write (read) the transposed layout directly.
+    #[inline(always)]
     fn solve(&mut self) {
         let (nx, ny) = (self.nx, self.ny);
         let ny2 = ny + ny % 2;
-        let (map, t, psi) = (&self.map, &mut self.transposed, &mut self.psi);
-        let (packed, scratch, zeros) = (&mut self.packed, &mut self.fft_scratch, &self.zeros);
+        // Slices, not vectors: a store through a slice cannot move the slice itself, so the
+        // loops keep its address in a register.
+        let (map, t, psi) = (&self.map[..], &mut self.transposed[..], &mut self.psi[..]);
+        let (packed, scratch, zeros) = (
+            &mut self.packed[..],
+            &mut self.fft_scratch[..],
+            &self.zeros[..],
+        );
         let row = |r: usize| {
             if r < ny {
                 &map[r * nx..(r + 1) * nx]
@@ -410,25 +437,31 @@ impl Electrostatics {
     }
 }
 
-/// `∫ max(0, b − |u − c|) du` from −∞ to `c + d` (the integral of a tent of half-width `b`).
-#[inline]
-fn tent_integral(d: f64, b: f64) -> f64 {
-    if d <= -b {
-        0.0
-    } else if d <= 0.0 {
-        (b + d) * (b + d) / 2.0
-    } else if d < b {
-        b * b - (b - d) * (b - d) / 2.0
+/// `2·∫ max(0, b − |u − c|) du − b²` from −∞ to `c + d` (twice the integral of a tent of
+/// half-width `b`, shifted by a constant that cancels in differences): with `u = d` clamped to
+/// `[−b, b]`, `(b + min(u, 0))² − (b − max(u, 0))²`. Branch-free, so that the loops over bins
+/// vectorize.
+#[inline(always)]
+fn tent_integral2(d: f64, b: f64) -> f64 {
+    let u = if d < -b {
+        -b
+    } else if d > b {
+        b
     } else {
-        b * b
-    }
+        d
+    };
+    let (l, r) = (
+        b + if u < 0.0 { u } else { 0.0 },
+        b - if u > 0.0 { u } else { 0.0 },
+    );
+    l * l - r * r
 }
 
 /// Share of a movable interval `[a0, a1]` in each bin of size `b` after smoothing it with a
 /// box one bin wide (cloud-in-cell): `(1/b)·∫ |bin ∩ [s − b/2, s + b/2]| ds` over the
 /// interval, which is a C¹ function of the interval's position, so the energy's gradient is
 /// continuous. Appends the bins' shares to `out` and returns `(first bin, len)`.
-#[inline]
+#[inline(always)]
 fn smooth_weights(
     a0: f64,
     a1: f64,
@@ -438,9 +471,10 @@ fn smooth_weights(
 ) -> Option<(usize, usize)> {
     let h = b / 2.0;
     let (lo, hi) = span(a0 - h, a1 + h, b, n)?;
+    let half_inv = 0.5 / b;
     out.extend((lo..=hi).map(|i| {
         let c = (i as f64 + 0.5) * b;
-        (tent_integral(a1 - c, b) - tent_integral(a0 - c, b)) / b
+        (tent_integral2(a1 - c, b) - tent_integral2(a0 - c, b)) * half_inv
     }));
     Some((lo, hi - lo + 1))
 }

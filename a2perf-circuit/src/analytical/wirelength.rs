@@ -203,40 +203,15 @@ impl WaNets {
         }
     }
 
-    /// WA wirelength and HPWL of `pos`; adds `∂WA/∂pos` into `grad` (which must be zeroed by
-    /// the caller).
-    pub fn evaluate(&mut self, pos: &[[f64; 2]], gamma: f64, grad: &mut [[f64; 2]]) -> WaStats {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::is_x86_feature_detected as has;
-            if has!("avx512f") && has!("fma") {
-                // SAFETY: the CPU has the features `evaluate_avx512` is compiled for.
-                return unsafe { self.evaluate_avx512(pos, gamma, grad) };
-            }
-            if has!("avx2") && has!("fma") {
-                // SAFETY: the CPU has the features `evaluate_avx2` is compiled for.
-                return unsafe { self.evaluate_avx2(pos, gamma, grad) };
-            }
-        }
-        self.evaluate_generic(pos, gamma, grad)
-    }
-
-    /// [`Self::evaluate`] compiled for AVX2 and FMA: four lanes instead of SSE2's two in the
-    /// exponential passes. Rust fuses a multiply and an add only where the code says
-    /// `mul_add` (exact on every build), so all builds round every operation alike and give
-    /// the same bits.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn evaluate_avx2(&mut self, pos: &[[f64; 2]], gamma: f64, grad: &mut [[f64; 2]]) -> WaStats {
-        self.evaluate_generic(pos, gamma, grad)
-    }
-
-    /// [`Self::evaluate`] compiled for AVX-512: eight lanes (same bits, see
-    /// [`Self::evaluate_avx2`]).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx2,fma")]
-    fn evaluate_avx512(&mut self, pos: &[[f64; 2]], gamma: f64, grad: &mut [[f64; 2]]) -> WaStats {
-        self.evaluate_generic(pos, gamma, grad)
+    vector_builds! {
+        /// WA wirelength and HPWL of `pos`; adds `∂WA/∂pos` into `grad` (which must be zeroed
+        /// by the caller).
+        pub fn evaluate / evaluate_avx2 / evaluate_avx512 (
+            &mut self,
+            pos: &[[f64; 2]],
+            gamma: f64,
+            grad: &mut [[f64; 2]],
+        ) -> WaStats = evaluate_generic
     }
 
     /// Sorts the nets into degree groups (pin-major).
