@@ -12,6 +12,11 @@
 //! field `−∇ψ` integrated over the footprint instead, which is the same quantity on a smooth
 //! potential.
 //!
+//! The 1-D transforms are rustfft's complex FFTs, two real rows (or columns) per FFT by
+//! Makhoul's reordering. rustfft picks its AVX, SSE or scalar code by CPU, so the last bits of a
+//! run may differ between CPU kinds (all x86-64 CPUs with AVX and FMA take the same code), never
+//! between runs or thread counts.
+//!
 //! As DREAMPlace, a movable object narrower than `√2` bins is stretched to `√2` bins with its
 //! charge scaled down to keep its area, so that a small cell always feels the field of more
 //! than one bin; fixed objects deposit their exact footprint times the target density.
