@@ -12,13 +12,19 @@
 //! field `−∇ψ` integrated over the footprint instead, which is the same quantity on a smooth
 //! potential.
 //!
+//! The 1-D transforms are rustfft's complex FFTs, two real rows (or columns) per FFT by
+//! Makhoul's reordering. rustfft picks its AVX, SSE or scalar code by CPU, so the last bits of a
+//! run may differ between CPU kinds (all x86-64 CPUs with AVX and FMA take the same code), never
+//! between runs or thread counts.
+//!
 //! As DREAMPlace, a movable object narrower than `√2` bins is stretched to `√2` bins with its
 //! charge scaled down to keep its area, so that a small cell always feels the field of more
 //! than one bin; fixed objects deposit their exact footprint times the target density.
 
 use std::sync::Arc;
 
-use rustdct::{Dct2, Dct3, DctPlanner};
+use rustdct::rustfft::num_complex::Complex;
+use rustdct::rustfft::{Fft, FftPlanner};
 
 /// Bins, potential solver and buffers of the density term (reused from run to run).
 pub struct Electrostatics {
@@ -30,20 +36,28 @@ pub struct Electrostatics {
     height: f64,
     /// `1/λ_uv` times the normalisation of the transforms, transposed layout `[u·ny + v]`.
     inv_lambda: Vec<f64>,
-    dct2_x: Arc<dyn Dct2<f64>>,
-    dct2_y: Arc<dyn Dct2<f64>>,
-    dct3_x: Arc<dyn Dct3<f64>>,
-    dct3_y: Arc<dyn Dct3<f64>>,
-    fft_scratch: Vec<f64>,
+    /// The 1-D transforms along x (rows) and y (columns).
+    tx: PairDct,
+    ty: PairDct,
+    /// Pairs of rows (or columns) packed as complex numbers, and the FFTs' scratch.
+    packed: Vec<Complex<f64>>,
+    fft_scratch: Vec<Complex<f64>>,
     /// Charge of the fixed objects (area per bin times the target density), `[iy·nx + ix]`.
     fixed: Vec<f64>,
     /// Total charge of the current evaluation.
     map: Vec<f64>,
     /// Potential of the current evaluation.
     psi: Vec<f64>,
+    /// The map after the pass along x, `[u·(ny + ny mod 2) + iy]` (rows padded to an even
+    /// length, one zero row past the last), so that every row and column has a partner.
     transposed: Vec<f64>,
+    /// The partner of the last row or column when their number is odd.
+    zeros: Vec<f64>,
+    /// Every movable object's smoothed shares of the bins in x and in y (see
+    /// [`smooth_weights`]), computed once per evaluation for the deposit and the gradient.
     wx: Vec<f64>,
     wy: Vec<f64>,
+    foot: Vec<Footprint>,
     dx: Vec<f64>,
     dy: Vec<f64>,
 }
@@ -82,6 +96,40 @@ pub struct DensityStats {
     pub max_density: f64,
 }
 
+/// `(Σ qψ, Σ max(q − cap, 0), max q)` over the bins, each in four lanes so that the pass
+/// vectorizes (and gives the same bits on every build).
+#[inline(always)]
+fn bin_sums(map: &[f64], psi: &[f64], cap: f64) -> ([f64; 4], [f64; 4], [f64; 4]) {
+    let (mut dot, mut over, mut top) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+    let (qs, ps) = (map.chunks_exact(4), psi.chunks_exact(4));
+    let (q_rest, p_rest) = (qs.remainder(), ps.remainder());
+    for (q, p) in qs.zip(ps) {
+        for l in 0..4 {
+            dot[l] += q[l] * p[l];
+            over[l] += if q[l] > cap { q[l] - cap } else { 0.0 };
+            top[l] = if q[l] > top[l] { q[l] } else { top[l] };
+        }
+    }
+    for (l, (&q, &p)) in q_rest.iter().zip(p_rest).enumerate() {
+        dot[l] += q * p;
+        over[l] += if q > cap { q - cap } else { 0.0 };
+        top[l] = if q > top[l] { q } else { top[l] };
+    }
+    (dot, over, top)
+}
+
+/// Where a movable object's shares lie: columns `c0..c0 + cw` (at `ox` in the x shares), rows
+/// `r0..r0 + rw` (at `oy` in the y shares); `cw == 0` for an object outside the canvas.
+#[derive(Clone, Copy, Debug, Default)]
+struct Footprint {
+    c0: usize,
+    cw: usize,
+    r0: usize,
+    rw: usize,
+    ox: usize,
+    oy: usize,
+}
+
 /// Columns (or rows) `[lo, hi]` of bins of size `b` overlapped by `[a0, a1]`, clamped to `n`
 /// bins; `None` when the span is empty or outside.
 #[inline]
@@ -105,24 +153,18 @@ fn overlap(a0: f64, a1: f64, i: usize, b: f64) -> f64 {
 impl Electrostatics {
     /// Bins `nx × ny` over a `width × height` canvas.
     pub fn new(width: f64, height: f64, nx: usize, ny: usize) -> Self {
-        let mut planner = DctPlanner::new();
-        let dct2_x = planner.plan_dct2(nx);
-        let dct2_y = planner.plan_dct2(ny);
-        let dct3_x = planner.plan_dct3(nx);
-        let dct3_y = planner.plan_dct3(ny);
-        let scratch_len = [
-            dct2_x.get_scratch_len(),
-            dct2_y.get_scratch_len(),
-            dct3_x.get_scratch_len(),
-            dct3_y.get_scratch_len(),
-        ]
-        .into_iter()
-        .max()
-        .unwrap_or(0);
+        let mut planner = FftPlanner::new();
+        let (tx, ty) = (
+            PairDct::new(&mut planner, nx),
+            PairDct::new(&mut planner, ny),
+        );
+        let scratch_len = tx.scratch_len().max(ty.scratch_len());
+        let packed_len = (ny.div_ceil(2) * nx).max(nx.div_ceil(2) * ny);
         let (bx, by) = (width / nx as f64, height / ny as f64);
         // DCT-III(DCT-II(x)) = (n/2)·x in each dimension; the bin area turns charge into density.
         let norm = 4.0 / (nx * ny) as f64 / (bx * by);
-        let mut inv_lambda = vec![0.0; nx * ny];
+        // A zero row past the last: the partner of the last column when `nx` is odd.
+        let mut inv_lambda = vec![0.0; (nx + 1) * ny];
         let (kx, ky) = (std::f64::consts::PI / width, std::f64::consts::PI / height);
         for u in 0..nx {
             for v in 0..ny {
@@ -140,17 +182,18 @@ impl Electrostatics {
             width,
             height,
             inv_lambda,
-            dct2_x,
-            dct2_y,
-            dct3_x,
-            dct3_y,
-            fft_scratch: vec![0.0; scratch_len],
+            tx,
+            ty,
+            packed: vec![Complex::default(); packed_len],
+            fft_scratch: vec![Complex::default(); scratch_len],
             fixed: vec![0.0; nx * ny],
             map: vec![0.0; nx * ny],
             psi: vec![0.0; nx * ny],
-            transposed: vec![0.0; nx * ny],
-            wx: vec![0.0; nx],
-            wy: vec![0.0; ny],
+            transposed: vec![0.0; (nx + 1) * (ny + ny % 2)],
+            zeros: vec![0.0; nx.max(ny)],
+            wx: Vec::new(),
+            wy: Vec::new(),
+            foot: Vec::new(),
             dx: vec![0.0; nx],
             dy: vec![0.0; ny],
         }
@@ -207,9 +250,20 @@ impl Electrostatics {
         }
     }
 
-    /// Charge map of `pos` (centres) with `charges`, potential, energy and statistics; writes
-    /// `∂E/∂pos` into `grad` (overwritten).
-    pub fn evaluate(
+    vector_builds! {
+        /// Charge map of `pos` (centres) with `charges`, potential, energy and statistics;
+        /// writes `∂E/∂pos` into `grad` (overwritten).
+        pub fn evaluate / evaluate_avx2 / evaluate_avx512 (
+            &mut self,
+            pos: &[[f64; 2]],
+            charges: &[Charge],
+            target_density: f64,
+            grad: &mut [[f64; 2]],
+        ) -> DensityStats = evaluate_generic
+    }
+
+    #[inline(always)]
+    fn evaluate_generic(
         &mut self,
         pos: &[[f64; 2]],
         charges: &[Charge],
@@ -218,28 +272,51 @@ impl Electrostatics {
     ) -> DensityStats {
         let (bx, by) = (self.bx, self.by);
         self.map.copy_from_slice(&self.fixed);
+        self.wx.clear();
+        self.wy.clear();
+        self.foot.clear();
         for (p, c) in pos.iter().zip(charges) {
-            self.deposit_smooth(
-                [p[0] - c.hw, p[1] - c.hh, p[0] + c.hw, p[1] + c.hh],
-                c.ratio,
+            let (ox, oy) = (self.wx.len(), self.wy.len());
+            let f = smooth_weights(p[0] - c.hw, p[0] + c.hw, bx, self.nx, &mut self.wx).and_then(
+                |(c0, cw)| {
+                    let (r0, rw) =
+                        smooth_weights(p[1] - c.hh, p[1] + c.hh, by, self.ny, &mut self.wy)?;
+                    Some(Footprint {
+                        c0,
+                        cw,
+                        r0,
+                        rw,
+                        ox,
+                        oy,
+                    })
+                },
             );
+            let Some(f) = f else {
+                // Outside the canvas: no charge, no gradient.
+                self.wx.truncate(ox);
+                self.foot.push(Footprint::default());
+                continue;
+            };
+            let (wx, wy) = (&self.wx[ox..ox + f.cw], &self.wy[oy..oy + f.rw]);
+            for (r, &wy) in (f.r0..f.r0 + f.rw).zip(wy) {
+                let base = r * self.nx + f.c0;
+                let wy = c.ratio * wy;
+                for (m, &wx) in self.map[base..base + f.cw].iter_mut().zip(wx) {
+                    *m += wy * wx;
+                }
+            }
+            self.foot.push(f);
         }
         self.solve();
-        let energy = 0.5
-            * self
-                .map
-                .iter()
-                .zip(&self.psi)
-                .map(|(q, p)| q * p)
-                .sum::<f64>();
         let cap = target_density * bx * by;
-        let (mut overflow_area, mut max_q) = (0.0f64, 0.0f64);
-        for &q in &self.map {
-            overflow_area += (q - cap).max(0.0);
-            max_q = max_q.max(q);
-        }
-        for ((p, c), g) in pos.iter().zip(charges).zip(grad.iter_mut()) {
+        let (dot, over, top) = bin_sums(&self.map, &self.psi, cap);
+        let lanes = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
+        let energy = 0.5 * lanes(dot);
+        let overflow_area = lanes(over);
+        let max_q = top.into_iter().fold(0.0f64, f64::max);
+        for (((p, c), g), k) in pos.iter().zip(charges).zip(grad.iter_mut()).zip(0..) {
             *g = self.rect_gradient(
+                k,
                 [p[0] - c.hw, p[1] - c.hh, p[0] + c.hw, p[1] + c.hh],
                 c.ratio,
             );
@@ -251,76 +328,106 @@ impl Electrostatics {
         }
     }
 
-    /// Adds a movable rectangle's smoothed charge (see [`smooth_weights`]).
-    fn deposit_smooth(&mut self, [x0, y0, x1, y1]: [f64; 4], ratio: f64) {
-        let (nx, ny) = (self.nx, self.ny);
-        let Some((c0, cw)) = smooth_weights(x0, x1, self.bx, nx, &mut self.wx) else {
-            return;
-        };
-        let Some((r0, rw)) = smooth_weights(y0, y1, self.by, ny, &mut self.wy) else {
-            return;
-        };
-        for (r, &wy) in (r0..r0 + rw).zip(&self.wy[..rw]) {
-            let base = r * nx;
-            let wy = ratio * wy;
-            for (m, &wx) in self.map[base + c0..base + c0 + cw]
-                .iter_mut()
-                .zip(&self.wx[..cw])
-            {
-                *m += wy * wx;
-            }
+    /// `(∂E/∂x, ∂E/∂y)` of movable object `k`'s smoothed charge (rectangle
+    /// `[x0, y0, x1, y1]`) with the current potential.
+    #[inline(always)]
+    fn rect_gradient(&mut self, k: usize, [x0, y0, x1, y1]: [f64; 4], ratio: f64) -> [f64; 2] {
+        let f = self.foot[k];
+        if f.cw == 0 {
+            return [0.0, 0.0];
         }
-    }
-
-    /// `(∂E/∂x, ∂E/∂y)` of a movable rectangle's smoothed charge with the current potential.
-    fn rect_gradient(&mut self, [x0, y0, x1, y1]: [f64; 4], ratio: f64) -> [f64; 2] {
         let nx = self.nx;
-        let Some((c0, cw)) = smooth_weights(x0, x1, self.bx, nx, &mut self.wx) else {
-            return [0.0, 0.0];
-        };
-        let Some((r0, rw)) = smooth_weights(y0, y1, self.by, self.ny, &mut self.wy) else {
-            return [0.0, 0.0];
-        };
-        smooth_slopes(x0, x1, self.bx, c0, cw, &mut self.dx);
-        smooth_slopes(y0, y1, self.by, r0, rw, &mut self.dy);
+        let (wx, wy) = (&self.wx[f.ox..f.ox + f.cw], &self.wy[f.oy..f.oy + f.rw]);
+        smooth_slopes(x0, x1, self.bx, f.c0, f.cw, &mut self.dx);
+        smooth_slopes(y0, y1, self.by, f.r0, f.rw, &mut self.dy);
         let mut g = [0.0, 0.0];
-        for r in 0..rw {
-            let row = &self.psi[(r0 + r) * nx + c0..(r0 + r) * nx + c0 + cw];
+        for ((r, wy), dy) in (f.r0..).zip(wy).zip(&self.dy[..f.rw]) {
+            let base = r * nx + f.c0;
+            let row = &self.psi[base..base + f.cw];
             let (mut sx, mut s) = (0.0, 0.0);
-            for ((p, wx), dx) in row.iter().zip(&self.wx[..cw]).zip(&self.dx[..cw]) {
+            for ((p, wx), dx) in row.iter().zip(wx).zip(&self.dx[..f.cw]) {
                 sx += dx * p;
                 s += wx * p;
             }
-            g[0] += self.wy[r] * sx;
-            g[1] += self.dy[r] * s;
+            g[0] += wy * sx;
+            g[1] += dy * s;
         }
         [ratio * g[0], ratio * g[1]]
     }
 
-    /// `psi = G · map`.
+    /// `psi = G · map`: DCT-II along x then y, the division by the eigenvalues, DCT-III along
+    /// y then x. Each pass transforms the rows two at a time, packed as one complex FFT, and
+    /// the passes along x write (read) the transposed layout directly.
+    #[inline(always)]
     fn solve(&mut self) {
         let (nx, ny) = (self.nx, self.ny);
-        self.psi.copy_from_slice(&self.map);
-        for row in self.psi.chunks_exact_mut(nx) {
-            self.dct2_x
-                .process_dct2_with_scratch(row, &mut self.fft_scratch);
+        let ny2 = ny + ny % 2;
+        // Slices, not vectors: a store through a slice cannot move the slice itself, so the
+        // loops keep its address in a register.
+        let (map, t, psi) = (&self.map[..], &mut self.transposed[..], &mut self.psi[..]);
+        let (packed, scratch, zeros) = (
+            &mut self.packed[..],
+            &mut self.fft_scratch[..],
+            &self.zeros[..],
+        );
+        let row = |r: usize| {
+            if r < ny {
+                &map[r * nx..(r + 1) * nx]
+            } else {
+                &zeros[..nx]
+            }
+        };
+        // Rows of the map: DCT-II along x into t[u·ny2 + iy].
+        let px = &mut packed[..ny.div_ceil(2) * nx];
+        for (j, z) in px.chunks_exact_mut(nx).enumerate() {
+            self.tx.pack_forward(z, row(2 * j), row(2 * j + 1));
         }
-        transpose(&self.psi, &mut self.transposed, nx, ny);
-        for (col, il) in self
-            .transposed
-            .chunks_exact_mut(ny)
-            .zip(self.inv_lambda.chunks_exact(ny))
-        {
-            self.dct2_y
-                .process_dct2_with_scratch(col, &mut self.fft_scratch);
-            col.iter_mut().zip(il).for_each(|(a, l)| *a *= l);
-            self.dct3_y
-                .process_dct3_with_scratch(col, &mut self.fft_scratch);
+        self.tx.forward.process_with_scratch(px, scratch);
+        for (j, z) in px.chunks_exact(nx).enumerate() {
+            self.tx.unpack_forward(z, |k, a, b| {
+                t[k * ny2 + 2 * j] = a;
+                t[k * ny2 + 2 * j + 1] = b;
+            });
         }
-        transpose(&self.transposed, &mut self.psi, ny, nx);
-        for row in self.psi.chunks_exact_mut(nx) {
-            self.dct3_x
-                .process_dct3_with_scratch(row, &mut self.fft_scratch);
+        // Columns: DCT-II along y, times 1/λ, DCT-III along y, in place in t.
+        let py = &mut packed[..nx.div_ceil(2) * ny];
+        for (j, z) in py.chunks_exact_mut(ny).enumerate() {
+            let (a, b) = (2 * j * ny2, (2 * j + 1) * ny2);
+            self.ty.pack_forward(z, &t[a..a + ny], &t[b..b + ny]);
+        }
+        self.ty.forward.process_with_scratch(py, scratch);
+        for (j, z) in py.chunks_exact_mut(ny).enumerate() {
+            let il = &self.inv_lambda[2 * j * ny..(2 * j + 2) * ny];
+            let (ila, ilb) = il.split_at(ny);
+            self.ty.spectral_filter(z, ila, ilb);
+        }
+        self.ty.inverse.process_with_scratch(py, scratch);
+        for (j, z) in py.chunks_exact(ny).enumerate() {
+            let (a, b) = (2 * j * ny2, (2 * j + 1) * ny2);
+            let (ta, tb) = t[a..b + ny].split_at_mut(ny2);
+            // The partner past the last column stays zero.
+            let tb = if 2 * j + 1 < nx {
+                Some(&mut tb[..ny])
+            } else {
+                None
+            };
+            self.ty.unpack_inverse(z, &mut ta[..ny], tb);
+        }
+        // DCT-III along x, reading t transposed, into the rows of psi.
+        let px = &mut packed[..ny.div_ceil(2) * nx];
+        for (j, z) in px.chunks_exact_mut(nx).enumerate() {
+            self.tx
+                .pack_inverse(z, |k| (t[k * ny2 + 2 * j], t[k * ny2 + 2 * j + 1]));
+        }
+        self.tx.inverse.process_with_scratch(px, scratch);
+        for (j, z) in px.chunks_exact(nx).enumerate() {
+            let (a, b) = (2 * j * nx, (2 * j + 1) * nx);
+            if b < psi.len() {
+                let (pa, pb) = psi[a..b + nx].split_at_mut(nx);
+                self.tx.unpack_inverse(z, pa, Some(pb));
+            } else {
+                self.tx.unpack_inverse(z, &mut psi[a..b], None);
+            }
         }
     }
 
@@ -335,32 +442,45 @@ impl Electrostatics {
     }
 }
 
-/// `∫ max(0, b − |u − c|) du` from −∞ to `c + d` (the integral of a tent of half-width `b`).
-#[inline]
-fn tent_integral(d: f64, b: f64) -> f64 {
-    if d <= -b {
-        0.0
-    } else if d <= 0.0 {
-        (b + d) * (b + d) / 2.0
-    } else if d < b {
-        b * b - (b - d) * (b - d) / 2.0
+/// `2·∫ max(0, b − |u − c|) du − b²` from −∞ to `c + d` (twice the integral of a tent of
+/// half-width `b`, shifted by a constant that cancels in differences): with `u = d` clamped to
+/// `[−b, b]`, `(b + min(u, 0))² − (b − max(u, 0))²`. Branch-free, so that the loops over bins
+/// vectorize.
+#[inline(always)]
+fn tent_integral2(d: f64, b: f64) -> f64 {
+    let u = if d < -b {
+        -b
+    } else if d > b {
+        b
     } else {
-        b * b
-    }
+        d
+    };
+    let (l, r) = (
+        b + if u < 0.0 { u } else { 0.0 },
+        b - if u > 0.0 { u } else { 0.0 },
+    );
+    l * l - r * r
 }
 
 /// Share of a movable interval `[a0, a1]` in each bin of size `b` after smoothing it with a
 /// box one bin wide (cloud-in-cell): `(1/b)·∫ |bin ∩ [s − b/2, s + b/2]| ds` over the
 /// interval, which is a C¹ function of the interval's position, so the energy's gradient is
-/// continuous. Writes the bins' shares into `out[..len]` and returns `(first bin, len)`.
-#[inline]
-fn smooth_weights(a0: f64, a1: f64, b: f64, n: usize, out: &mut [f64]) -> Option<(usize, usize)> {
+/// continuous. Appends the bins' shares to `out` and returns `(first bin, len)`.
+#[inline(always)]
+fn smooth_weights(
+    a0: f64,
+    a1: f64,
+    b: f64,
+    n: usize,
+    out: &mut Vec<f64>,
+) -> Option<(usize, usize)> {
     let h = b / 2.0;
     let (lo, hi) = span(a0 - h, a1 + h, b, n)?;
-    for (k, i) in (lo..=hi).enumerate() {
+    let half_inv = 0.5 / b;
+    out.extend((lo..=hi).map(|i| {
         let c = (i as f64 + 0.5) * b;
-        out[k] = (tent_integral(a1 - c, b) - tent_integral(a0 - c, b)) / b;
-    }
+        (tent_integral2(a1 - c, b) - tent_integral2(a0 - c, b)) * half_inv
+    }));
     Some((lo, hi - lo + 1))
 }
 
@@ -394,23 +514,142 @@ fn deposit(
     }
 }
 
-/// `dst[c·rows + r] = src[r·cols + c]` for a `rows × cols` row-major `src`.
-fn transpose(src: &[f64], dst: &mut [f64], cols: usize, rows: usize) {
-    const B: usize = 16;
-    for r0 in (0..rows).step_by(B) {
-        for c0 in (0..cols).step_by(B) {
-            for r in r0..(r0 + B).min(rows) {
-                for c in c0..(c0 + B).min(cols) {
-                    dst[c * rows + r] = src[r * cols + c];
-                }
+/// Two real DCTs (rustdct's unnormalized DCT-II, `X_k = Σ x_n cos(πk(2n+1)/2N)`, and its
+/// DCT-III, `x_n = X_0/2 + Σ_{k≥1} X_k cos(πk(2n+1)/2N)`) of length `N` by one complex FFT
+/// of length `N` (Makhoul's reordering; the two real sequences as the real and imaginary
+/// parts). Glue around rustfft: the transforms themselves are rustfft's.
+struct PairDct {
+    n: usize,
+    forward: Arc<dyn Fft<f64>>,
+    inverse: Arc<dyn Fft<f64>>,
+    /// `cos(πk/2N)/2`, `sin(πk/2N)/2`.
+    half_cos: Vec<f64>,
+    half_sin: Vec<f64>,
+}
+
+impl PairDct {
+    fn new(planner: &mut FftPlanner<f64>, n: usize) -> Self {
+        let angle = |k: usize| std::f64::consts::PI * k as f64 / (2 * n) as f64;
+        Self {
+            n,
+            forward: planner.plan_fft_forward(n),
+            inverse: planner.plan_fft_inverse(n),
+            half_cos: (0..n).map(|k| angle(k).cos() / 2.0).collect(),
+            half_sin: (0..n).map(|k| angle(k).sin() / 2.0).collect(),
+        }
+    }
+
+    fn scratch_len(&self) -> usize {
+        self.forward
+            .get_inplace_scratch_len()
+            .max(self.inverse.get_inplace_scratch_len())
+    }
+
+    /// `z` = the pair `(a, b)` in Makhoul's order (even samples first, then the odd ones
+    /// backwards), ready for the forward FFT.
+    #[inline(always)]
+    fn pack_forward(&self, z: &mut [Complex<f64>], a: &[f64], b: &[f64]) {
+        let n = self.n;
+        let (lo, hi) = z[..n].split_at_mut(n.div_ceil(2));
+        for (h, zh) in lo.iter_mut().enumerate() {
+            *zh = Complex::new(a[2 * h], b[2 * h]);
+        }
+        for (h, zh) in hi.iter_mut().rev().enumerate() {
+            *zh = Complex::new(a[2 * h + 1], b[2 * h + 1]);
+        }
+    }
+
+    /// The two DCT-IIs `(A_k, B_k)` from the forward FFT `z` of a packed pair, to `out`.
+    #[inline(always)]
+    fn unpack_forward(&self, z: &[Complex<f64>], mut out: impl FnMut(usize, f64, f64)) {
+        let (a, b) = self.dct2_coefficient(0, z[0], z[0]);
+        out(0, a, b);
+        for k in 1..self.n {
+            let (a, b) = self.dct2_coefficient(k, z[k], z[self.n - k]);
+            out(k, a, b);
+        }
+    }
+
+    /// `z` = the packed spectrum whose inverse FFT is the pair of DCT-IIIs of `X(k) = (A_k, B_k)`.
+    #[inline(always)]
+    fn pack_inverse(&self, z: &mut [Complex<f64>], x: impl Fn(usize) -> (f64, f64)) {
+        let n = self.n;
+        for (k, zk) in z.iter_mut().enumerate().take(n) {
+            let xr = if k == 0 { (0.0, 0.0) } else { x(n - k) };
+            *zk = self.packed_coefficient(k, x(k), xr);
+        }
+    }
+
+    /// Coefficient `k` of the packed spectrum from `X_k` and `X_{N−k}` (zero for `k = 0`):
+    /// `V = (c + i s)(X_k − i X_{N−k})` for each sequence, then `V_a + i V_b`.
+    #[inline(always)]
+    fn packed_coefficient(
+        &self,
+        k: usize,
+        (a, b): (f64, f64),
+        (ar, br): (f64, f64),
+    ) -> Complex<f64> {
+        let (c, s) = (self.half_cos[k], self.half_sin[k]);
+        let (va_re, va_im) = (c * a + s * ar, s * a - c * ar);
+        let (vb_re, vb_im) = (c * b + s * br, s * b - c * br);
+        Complex::new(va_re - vb_im, va_im + vb_re)
+    }
+
+    /// The pair's DCT-IIs `(A_k, B_k)` from coefficients `k` and `N − k` of its forward FFT.
+    #[inline(always)]
+    fn dct2_coefficient(&self, k: usize, p: Complex<f64>, q: Complex<f64>) -> (f64, f64) {
+        let (c, s) = (self.half_cos[k], self.half_sin[k]);
+        (
+            c * (p.re + q.re) + s * (p.im - q.im),
+            c * (p.im + q.im) - s * (p.re - q.re),
+        )
+    }
+
+    /// The forward FFT `z` of a packed pair turned, in place, into the packed spectrum of the
+    /// pair's DCT-IIIs after scaling the DCT-II coefficients by `sa` (a) and `sb` (b).
+    /// Coefficients `k` and `N − k` depend on each other only, so they are done together.
+    #[inline(always)]
+    fn spectral_filter(&self, z: &mut [Complex<f64>], sa: &[f64], sb: &[f64]) {
+        let n = self.n;
+        let scaled = |k: usize, (a, b): (f64, f64)| (a * sa[k], b * sb[k]);
+        let x = scaled(0, self.dct2_coefficient(0, z[0], z[0]));
+        z[0] = self.packed_coefficient(0, x, (0.0, 0.0));
+        for k in 1..=n / 2 {
+            let k2 = n - k;
+            let (p, q) = (z[k], z[k2]);
+            let x = scaled(k, self.dct2_coefficient(k, p, q));
+            let x2 = scaled(k2, self.dct2_coefficient(k2, q, p));
+            z[k] = self.packed_coefficient(k, x, x2);
+            z[k2] = self.packed_coefficient(k2, x2, x);
+        }
+    }
+
+    /// The pair of sequences `(a, b)` from the inverse FFT `z` of a packed spectrum (Makhoul's
+    /// order undone); `b` is dropped when `None`.
+    #[inline(always)]
+    fn unpack_inverse(&self, z: &[Complex<f64>], a: &mut [f64], b: Option<&mut [f64]>) {
+        let n = self.n;
+        let (lo, hi) = z[..n].split_at(n.div_ceil(2));
+        for (h, zh) in lo.iter().enumerate() {
+            a[2 * h] = zh.re;
+        }
+        for (h, zh) in hi.iter().rev().enumerate() {
+            a[2 * h + 1] = zh.re;
+        }
+        if let Some(b) = b {
+            for (h, zh) in lo.iter().enumerate() {
+                b[2 * h] = zh.im;
+            }
+            for (h, zh) in hi.iter().rev().enumerate() {
+                b[2 * h + 1] = zh.im;
             }
         }
     }
 }
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rustdct::DctPlanner;
 
     #[test]
     fn dct3_inverts_dct2_up_to_half_the_length() {
@@ -428,30 +667,73 @@ mod tests {
     #[test]
     fn the_potential_solves_poisson_with_the_mean_removed() {
         // −∇²ψ = ρ − mean(ρ) on the bins, checked with the 5-point Laplacian on a smooth
-        // charge (a wide Gaussian), away from the boundary.
-        let (w, h, nx, ny) = (64.0, 32.0, 64, 32);
-        let mut e = Electrostatics::new(w, h, nx, ny);
-        let (bx, by) = e.bin_size();
-        for iy in 0..ny {
-            for ix in 0..nx {
-                let (x, y) = ((ix as f64 + 0.5) * bx, (iy as f64 + 0.5) * by);
-                let d2 = (x - 30.0).powi(2) + (y - 17.0).powi(2);
-                e.fixed[iy * nx + ix] = (-d2 / 40.0).exp() * bx * by;
+        // charge (a wide Gaussian), away from the boundary; even and odd bin counts (the
+        // transforms pair rows and columns, an odd one out with zeros).
+        for (w, h, nx, ny) in [
+            (64.0, 32.0, 64, 32),
+            (63.0, 31.5, 63, 21),
+            (60.0, 30.0, 48, 33),
+        ] {
+            let mut e = Electrostatics::new(w, h, nx, ny);
+            let (bx, by) = e.bin_size();
+            for iy in 0..ny {
+                for ix in 0..nx {
+                    let (x, y) = ((ix as f64 + 0.5) * bx, (iy as f64 + 0.5) * by);
+                    let d2 = (x - 30.0).powi(2) + (y - 17.0).powi(2);
+                    e.fixed[iy * nx + ix] = (-d2 / 40.0).exp() * bx * by;
+                }
+            }
+            let mut g = [[0.0; 2]; 0];
+            e.evaluate(&[], &[], 1.0, &mut g);
+            let mean = e.map.iter().sum::<f64>() / (nx * ny) as f64 / (bx * by);
+            let psi = |ix: usize, iy: usize| e.psi[iy * nx + ix];
+            let mut worst = 0.0f64;
+            for iy in 4..ny - 4 {
+                for ix in 4..nx - 4 {
+                    let lap = (psi(ix + 1, iy) - 2.0 * psi(ix, iy) + psi(ix - 1, iy)) / (bx * bx)
+                        + (psi(ix, iy + 1) - 2.0 * psi(ix, iy) + psi(ix, iy - 1)) / (by * by);
+                    let rho = e.map[iy * nx + ix] / (bx * by) - mean;
+                    worst = worst.max((-lap - rho).abs());
+                }
+            }
+            assert!(worst < 0.02, "{nx} x {ny}: Poisson residual {worst}");
+        }
+    }
+
+    #[test]
+    fn the_paired_transforms_equal_rustdcts() {
+        let mut planner = DctPlanner::<f64>::new();
+        let mut fft = FftPlanner::new();
+        for n in [1, 2, 5, 8, 12, 17] {
+            let t = PairDct::new(&mut fft, n);
+            let a: Vec<f64> = (0..n).map(|i| ((i * 7) % 5) as f64 - 1.5).collect();
+            let b: Vec<f64> = (0..n).map(|i| ((i * 3) % 7) as f64 * 0.25).collect();
+            let mut z = vec![Complex::default(); n];
+            let mut scratch = vec![Complex::default(); t.scratch_len()];
+            t.pack_forward(&mut z, &a, &b);
+            t.forward.process_with_scratch(&mut z, &mut scratch);
+            let (mut da, mut db) = (a.clone(), b.clone());
+            planner.plan_dct2(n).process_dct2(&mut da);
+            planner.plan_dct2(n).process_dct2(&mut db);
+            let mut got = vec![(0.0, 0.0); n];
+            t.unpack_forward(&z, |k, x, y| got[k] = (x, y));
+            for k in 0..n {
+                assert!((got[k].0 - da[k]).abs() < 1e-12 && (got[k].1 - db[k]).abs() < 1e-12);
+            }
+            // DCT-III of (a, b) as spectra.
+            t.pack_inverse(&mut z, |k| (a[k], b[k]));
+            t.inverse.process_with_scratch(&mut z, &mut scratch);
+            let (mut ia, mut ib) = (vec![0.0; n], vec![0.0; n]);
+            t.unpack_inverse(&z, &mut ia, Some(&mut ib));
+            let (mut ra, mut rb) = (a.clone(), b.clone());
+            planner.plan_dct3(n).process_dct3(&mut ra);
+            planner.plan_dct3(n).process_dct3(&mut rb);
+            for k in 0..n {
+                assert!(
+                    (ia[k] - ra[k]).abs() < 1e-12 && (ib[k] - rb[k]).abs() < 1e-12,
+                    "{n}"
+                );
             }
         }
-        let mut g = [[0.0; 2]; 0];
-        e.evaluate(&[], &[], 1.0, &mut g);
-        let mean = e.map.iter().sum::<f64>() / (nx * ny) as f64 / (bx * by);
-        let psi = |ix: usize, iy: usize| e.psi[iy * nx + ix];
-        let mut worst = 0.0f64;
-        for iy in 4..ny - 4 {
-            for ix in 4..nx - 4 {
-                let lap = (psi(ix + 1, iy) - 2.0 * psi(ix, iy) + psi(ix - 1, iy)) / (bx * bx)
-                    + (psi(ix, iy + 1) - 2.0 * psi(ix, iy) + psi(ix, iy - 1)) / (by * by);
-                let rho = e.map[iy * nx + ix] / (bx * by) - mean;
-                worst = worst.max((-lap - rho).abs());
-            }
-        }
-        assert!(worst < 0.02, "Poisson residual {worst}");
     }
 }

@@ -48,6 +48,45 @@
 //! assert!(report.iterations <= 30 && report.hpwl.is_finite());
 //! ```
 
+/// Inside an `impl`: `$vis fn $name(&mut self, …) -> R` that runs `$generic` compiled for
+/// AVX-512 (`$avx512`) or for AVX2 and FMA (`$avx2`) when the CPU has them, else as it is. The
+/// builds round every operation alike (Rust fuses a multiply and an add only where the code
+/// says `mul_add`, which is exact on every build), so they give the same bits; wider vectors
+/// only run more lanes of the loops written to vectorize.
+macro_rules! vector_builds {
+    ($(#[$doc:meta])* $vis:vis fn $name:ident / $avx2:ident / $avx512:ident
+        (&mut self $(, $arg:ident : $ty:ty)* $(,)?) -> $ret:ty = $generic:ident) => {
+        $(#[$doc])*
+        $vis fn $name(&mut self $(, $arg: $ty)*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            {
+                use std::arch::is_x86_feature_detected as has;
+                if has!("avx512f") && has!("fma") {
+                    // SAFETY: the CPU has the features the AVX-512 build is compiled for.
+                    return unsafe { self.$avx512($($arg),*) };
+                }
+                if has!("avx2") && has!("fma") {
+                    // SAFETY: the CPU has the features the AVX2 build is compiled for.
+                    return unsafe { self.$avx2($($arg),*) };
+                }
+            }
+            self.$generic($($arg),*)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        fn $avx2(&mut self $(, $arg: $ty)*) -> $ret {
+            self.$generic($($arg),*)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx512f,avx2,fma")]
+        fn $avx512(&mut self $(, $arg: $ty)*) -> $ret {
+            self.$generic($($arg),*)
+        }
+    };
+}
+
 pub mod density;
 pub mod wirelength;
 

@@ -3,12 +3,15 @@
 //! `max − min` as `γ → 0`. The exponents are shifted by the net's maximum (minimum) so that
 //! they never overflow.
 //!
-//! Speed: one evaluation gathers every pin's position into flat arrays, writes all exponents,
-//! takes them in one pass with [`exp_clamped`] (branch-free, so the compiler vectorizes
-//! it; about eight times the throughput of the C library's `exp`, and the same bits on every
-//! x86-64 CPU, which glibc's FMA/non-FMA dispatch does not promise), then sums per net and
-//! scatters the gradient. Pins of fixed objects read and write a spare slot past the movable
-//! objects, so no loop branches on them.
+//! Speed: nets are grouped by their number of pins, and each group is stored pin-major
+//! (`[pin j][net i]`), so that every step of an evaluation (gather, bounds, exponentials, sums,
+//! gradient) is one loop over the group's nets that the compiler vectorizes, with no per-net
+//! loop overhead and no branch on the degree. The exponential is [`exp_clamped`] (branch-free,
+//! so it vectorizes; about eight times the throughput of the C library's `exp`, and the same
+//! bits on every x86-64 CPU, which glibc's FMA/non-FMA dispatch does not promise). Two-pin nets,
+//! half of a typical netlist, take the closed form `|Δ|·tanh(|Δ|/2γ)` (one exponential per
+//! axis). Pins of fixed objects read spare slots (position 0, their offset is their absolute
+//! position) and write spare gradient slots, so no loop branches on them.
 
 /// Pin of a net: a movable object (with an offset from its centre) or a fixed point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -24,7 +27,8 @@ pub struct Pin {
 /// `Pin::obj` of a pin that does not move.
 pub const FIXED: u32 = u32::MAX;
 
-/// Nets over movable objects, in compressed rows, and per-evaluation buffers.
+/// Nets over movable objects, in compressed rows, their degree groups and per-evaluation
+/// buffers.
 #[derive(Clone, Debug, Default)]
 pub struct WaNets {
     start: Vec<u32>,
@@ -33,16 +37,46 @@ pub struct WaNets {
     /// Whether the net enters the WA objective (DREAMPlace ignores nets of more than
     /// `ignore_net_degree` pins); every net enters the HPWL.
     smooth: Vec<bool>,
-    /// Per pin: x, y, then the weights of the upper and lower soft extremes in x and in y
-    /// (`e^{(x−mid)/γ}` and its reciprocal; see `evaluate`).
-    xs: Vec<f64>,
-    ys: Vec<f64>,
-    exps: Vec<[f64; 4]>,
-    /// `(net, axis, max, min)` of the axes too wide for one shared exponential.
-    wide: Vec<(u32, u8, f64, f64)>,
-    /// Positions and gradient of the movable objects plus the spare slot of fixed pins.
-    ext: Vec<[f64; 2]>,
-    grad: Vec<[f64; 2]>,
+    /// The smooth nets of two or more pins by degree (built on the first evaluation after a
+    /// change), and the other nets of two or more pins (HPWL only).
+    groups: Vec<Group>,
+    hpwl_only: Vec<u32>,
+    built: bool,
+    /// Per axis, positions and gradient of the movable objects plus the spare slots.
+    px: Vec<f64>,
+    py: Vec<f64>,
+    gx: Vec<f64>,
+    gy: Vec<f64>,
+    scratch: Scratch,
+    /// `(group, net)` of the nets too wide for one shared exponential on some axis.
+    wide: Vec<(u32, u32)>,
+}
+
+/// Smooth nets of one degree, pin-major: pin `j` of net `i` at `j·n + i`.
+#[derive(Clone, Debug, Default)]
+struct Group {
+    deg: usize,
+    weight: Vec<f64>,
+    slot: Vec<u32>,
+    dx: Vec<f64>,
+    dy: Vec<f64>,
+}
+
+/// Buffers of one group's evaluation on one axis.
+#[derive(Clone, Debug, Default)]
+struct Scratch {
+    v: Vec<f64>,
+    e: Vec<f64>,
+    r: Vec<f64>,
+    mid: Vec<f64>,
+    span: Vec<f64>,
+    ma: Vec<f64>,
+    mb: Vec<f64>,
+    ra: Vec<f64>,
+    rb: Vec<f64>,
+    /// Per net: its HPWL, then its WA.
+    net: Vec<f64>,
+    wide: Vec<bool>,
 }
 
 /// Result of one evaluation.
@@ -53,6 +87,12 @@ pub struct WaStats {
     /// Σ w · HPWL over every net.
     pub hpwl: f64,
 }
+
+/// Spare slots of the fixed pins (positions 0, gradients thrown away).
+const SPARE: usize = 16;
+
+/// The interleaving of a group's nets (see `WaNets::build`).
+const STRIDE: usize = 16;
 
 /// Half the widest span, in units of γ, that one shared exponential per pin covers.
 const WIDE: f64 = 700.0;
@@ -103,7 +143,9 @@ pub fn exp_clamped(x: f64) -> f64 {
     ];
     let mut p = C[0];
     for c in &C[1..] {
-        p = p * r + c;
+        // Fused: exact on every build (the FMA instruction, or the C library's `fma` on CPUs
+        // without it), one rounding instead of two.
+        p = p.mul_add(r, *c);
     }
     // |n| ≤ 1022, so 2ⁿ is a normal number; the mantissa of `t` holds 2⁵¹ + n.
     let ni = (t.to_bits() & ((1 << 52) - 1)) as i64 - (1 << 51);
@@ -120,6 +162,7 @@ impl WaNets {
         self.pins.clear();
         self.weight.clear();
         self.smooth.clear();
+        self.built = false;
     }
 
     /// Adds a net.
@@ -131,6 +174,7 @@ impl WaNets {
         self.start.push(self.pins.len() as u32);
         self.weight.push(weight);
         self.smooth.push(smooth);
+        self.built = false;
     }
 
     /// Number of nets.
@@ -159,135 +203,372 @@ impl WaNets {
         }
     }
 
-    /// WA wirelength and HPWL of `pos`; adds `∂WA/∂pos` into `grad` (which must be zeroed by
-    /// the caller).
-    pub fn evaluate(&mut self, pos: &[[f64; 2]], gamma: f64, grad: &mut [[f64; 2]]) -> WaStats {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2, the only feature `evaluate_avx2` is compiled for.
-            return unsafe { self.evaluate_avx2(pos, gamma, grad) };
-        }
-        self.evaluate_generic(pos, gamma, grad)
+    vector_builds! {
+        /// WA wirelength and HPWL of `pos`; adds `∂WA/∂pos` into `grad` (which must be zeroed
+        /// by the caller).
+        pub fn evaluate / evaluate_avx2 / evaluate_avx512 (
+            &mut self,
+            pos: &[[f64; 2]],
+            gamma: f64,
+            grad: &mut [[f64; 2]],
+        ) -> WaStats = evaluate_generic
     }
 
-    /// [`Self::evaluate`] compiled for AVX2: four lanes instead of SSE2's two in the
-    /// exponential pass. Rust never fuses a multiply and an add on its own, so both builds
-    /// round every operation alike and give the same bits.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn evaluate_avx2(&mut self, pos: &[[f64; 2]], gamma: f64, grad: &mut [[f64; 2]]) -> WaStats {
-        self.evaluate_generic(pos, gamma, grad)
+    /// Sorts the nets into degree groups (pin-major).
+    fn build(&mut self, m: usize) {
+        self.groups.clear();
+        self.hpwl_only.clear();
+        let mut by_deg: Vec<Vec<u32>> = Vec::new();
+        for n in 0..self.len() {
+            let deg = (self.start[n + 1] - self.start[n]) as usize;
+            if deg < 2 {
+                // No extent: nothing to add to either sum.
+                continue;
+            }
+            if !self.smooth[n] {
+                self.hpwl_only.push(n as u32);
+                continue;
+            }
+            if by_deg.len() <= deg {
+                by_deg.resize(deg + 1, Vec::new());
+            }
+            by_deg[deg].push(n as u32);
+        }
+        let mut fixed_pins = 0usize;
+        for (deg, nets) in by_deg.into_iter().enumerate() {
+            if nets.is_empty() {
+                continue;
+            }
+            let k = nets.len();
+            // Nets in netlist order often share their driver, so that consecutive gradient
+            // adds would hit one object, each waiting for the last; interleaved (net `r`, `r +
+            // STRIDE`, …, then `r + 1`, …) they hit different objects.
+            let nets: Vec<u32> = (0..STRIDE.min(k))
+                .flat_map(|r| nets[r..].iter().step_by(STRIDE).copied())
+                .collect();
+            let mut g = Group {
+                deg,
+                weight: nets.iter().map(|&n| self.weight[n as usize]).collect(),
+                slot: vec![0; deg * k],
+                dx: vec![0.0; deg * k],
+                dy: vec![0.0; deg * k],
+            };
+            for (i, &n) in nets.iter().enumerate() {
+                let a = self.start[n as usize] as usize;
+                for j in 0..deg {
+                    let p = &self.pins[a + j];
+                    g.slot[j * k + i] = if p.obj == FIXED {
+                        // Spread over the spare slots, for the same reason.
+                        fixed_pins += 1;
+                        (m + fixed_pins % SPARE) as u32
+                    } else {
+                        p.obj
+                    };
+                    g.dx[j * k + i] = p.dx;
+                    g.dy[j * k + i] = p.dy;
+                }
+            }
+            self.groups.push(g);
+        }
+        self.built = true;
     }
 
     #[inline(always)]
     fn evaluate_generic(&mut self, pos: &[[f64; 2]], gamma: f64, grad: &mut [[f64; 2]]) -> WaStats {
         let m = pos.len();
-        let slot = |p: &Pin| (p.obj as usize).min(m);
-        self.ext.clear();
-        self.ext.extend_from_slice(pos);
-        self.ext.push([0.0, 0.0]);
-        let np = self.pins.len();
-        self.xs.resize(np, 0.0);
-        self.ys.resize(np, 0.0);
-        self.exps.resize(np, [0.0; 4]);
-        for ((p, x), y) in self.pins.iter().zip(&mut self.xs).zip(&mut self.ys) {
-            let q = self.ext[slot(p)];
-            *x = q[0] + p.dx;
-            *y = q[1] + p.dy;
+        // The spare slots start at `m`: a change of the number of objects rebuilds the groups.
+        if !self.built || self.px.len() != m + SPARE {
+            self.build(m);
         }
-        // Bounds, HPWL and the exponents. WA is a ratio of sums, so each axis's exponentials
-        // may share any factor: `e = e^{(v−mid)/γ}` and `1/e` serve both sums with one
-        // exponential, as long as `|v − mid|/γ` stays in range; wider nets (rare: spans of
-        // more than 1,400 γ) take the two shifted exponentials after the vector pass.
-        let mut stats = WaStats::default();
+        self.px.clear();
+        self.py.clear();
+        self.px.extend(pos.iter().map(|p| p[0]));
+        self.py.extend(pos.iter().map(|p| p[1]));
+        self.px.resize(m + SPARE, 0.0);
+        self.py.resize(m + SPARE, 0.0);
+        self.gx.clear();
+        self.gx.resize(m + SPARE, 0.0);
+        self.gy.clear();
+        self.gy.resize(m + SPARE, 0.0);
         let inv = 1.0 / gamma;
+        let mut stats = WaStats::default();
         self.wide.clear();
-        for n in 0..self.len() {
-            let (a, b) = (self.start[n] as usize, self.start[n + 1] as usize);
-            if a == b {
-                continue;
-            }
-            let (xs, ys) = (&self.xs[a..b], &self.ys[a..b]);
-            let (xhi, xlo) = bounds(xs);
-            let (yhi, ylo) = bounds(ys);
-            stats.hpwl += self.weight[n] * ((xhi - xlo) + (yhi - ylo));
-            let exps = &mut self.exps[a..b];
-            if !self.smooth[n] {
-                exps.iter_mut().for_each(|e| *e = [0.0; 4]);
-                continue;
-            }
-            for (axis, (vals, hi, lo)) in [(xs, xhi, xlo), (ys, yhi, ylo)].into_iter().enumerate() {
-                let mid = 0.5 * (hi + lo);
-                if (hi - lo) * inv > 2.0 * WIDE {
-                    self.wide.push((n as u32, axis as u8, hi, lo));
-                    exps.iter_mut().for_each(|e| e[2 * axis] = 0.0);
+        for (gi, g) in self.groups.iter().enumerate() {
+            for (p, off, gr) in [
+                (&self.px, &g.dx, &mut self.gx),
+                (&self.py, &g.dy, &mut self.gy),
+            ] {
+                let ax = Axis {
+                    p,
+                    off,
+                    grad: gr,
+                    inv,
+                };
+                let (wa, hpwl) = if g.deg == 2 {
+                    two_pin_axis(g, ax, &mut self.scratch)
                 } else {
-                    for (e, &v) in exps.iter_mut().zip(vals) {
-                        e[2 * axis] = (v - mid) * inv;
-                    }
+                    group_axis(g, ax, &mut self.scratch, gi, &mut self.wide)
+                };
+                stats.wa += wa;
+                stats.hpwl += hpwl;
+            }
+        }
+        // Nets too wide for a shared exponential (rare: spans of more than 1,400 γ), with the
+        // two shifted exponentials, net by net.
+        self.wide.sort_unstable();
+        self.wide.dedup();
+        for &(gi, i) in &self.wide {
+            let g = &self.groups[gi as usize];
+            let k = g.weight.len();
+            let w = g.weight[i as usize];
+            for (p, off, gr) in [
+                (&self.px, &g.dx, &mut self.gx),
+                (&self.py, &g.dy, &mut self.gy),
+            ] {
+                let v: Vec<f64> = (0..g.deg)
+                    .map(|j| p[g.slot[j * k + i as usize] as usize] + off[j * k + i as usize])
+                    .collect();
+                let (hi, lo) = bounds(&v);
+                if (hi - lo) * inv <= 2.0 * WIDE {
+                    continue;
+                }
+                let (mut sa, mut ta, mut sb, mut tb) = (0.0, 0.0, 0.0, 0.0);
+                for &x in &v {
+                    let (ea, eb) = (exp_clamped((x - hi) * inv), exp_clamped((lo - x) * inv));
+                    sa += ea;
+                    ta += x * ea;
+                    sb += eb;
+                    tb += x * eb;
+                }
+                let (ma, mb) = (ta / sa, tb / sb);
+                stats.wa += w * (ma - mb);
+                for (j, &x) in v.iter().enumerate() {
+                    let (ea, eb) = (exp_clamped((x - hi) * inv), exp_clamped((lo - x) * inv));
+                    gr[g.slot[j * k + i as usize] as usize] +=
+                        w * (ea / sa * (1.0 + (x - ma) * inv) - eb / sb * (1.0 - (x - mb) * inv));
                 }
             }
         }
-        for e in &mut self.exps {
-            let (x, y) = (exp_clamped(e[0]), exp_clamped(e[2]));
-            *e = [x, 1.0 / x, y, 1.0 / y];
-        }
-        for &(n, axis, hi, lo) in &self.wide {
+        for &n in &self.hpwl_only {
             let (a, b) = (
                 self.start[n as usize] as usize,
                 self.start[n as usize + 1] as usize,
             );
-            let vals = if axis == 0 {
-                &self.xs[a..b]
-            } else {
-                &self.ys[a..b]
-            };
-            let i = 2 * axis as usize;
-            for (e, &v) in self.exps[a..b].iter_mut().zip(vals) {
-                e[i] = exp_clamped((v - hi) * inv);
-                e[i + 1] = exp_clamped((lo - v) * inv);
-            }
-        }
-        // Sums per net, then the gradient.
-        self.grad.clear();
-        self.grad.resize(m + 1, [0.0, 0.0]);
-        for n in 0..self.len() {
-            if !self.smooth[n] {
-                continue;
-            }
-            let (a, b) = (self.start[n] as usize, self.start[n + 1] as usize);
-            if a == b {
-                continue;
-            }
-            let w = self.weight[n];
             let pins = &self.pins[a..b];
-            let exps = &self.exps[a..b];
-            for (axis, vals) in [&self.xs[a..b], &self.ys[a..b]].into_iter().enumerate() {
-                let (ia, ib) = (2 * axis, 2 * axis + 1);
-                let (mut sa, mut ta, mut sb, mut tb) = (0.0, 0.0, 0.0, 0.0);
-                for (e, &v) in exps.iter().zip(vals) {
-                    sa += e[ia];
-                    ta += v * e[ia];
-                    sb += e[ib];
-                    tb += v * e[ib];
-                }
-                let (isa, isb) = (1.0 / sa, 1.0 / sb);
-                let (ma, mb) = (ta * isa, tb * isb);
-                stats.wa += w * (ma - mb);
-                let (ra, rb) = (w * isa, w * isb);
-                for ((p, e), &v) in pins.iter().zip(exps).zip(vals) {
-                    let d =
-                        ra * e[ia] * (1.0 + (v - ma) * inv) - rb * e[ib] * (1.0 - (v - mb) * inv);
-                    self.grad[slot(p)][axis] += d;
-                }
+            let at = |p: &Pin, d: usize| {
+                let q = if p.obj == FIXED {
+                    [0.0, 0.0]
+                } else {
+                    pos[p.obj as usize]
+                };
+                q[d] + if d == 0 { p.dx } else { p.dy }
+            };
+            for d in 0..2 {
+                let v: Vec<f64> = pins.iter().map(|p| at(p, d)).collect();
+                let (hi, lo) = bounds(&v);
+                stats.hpwl += self.weight[n as usize] * (hi - lo);
             }
         }
-        for (g, e) in grad.iter_mut().zip(&self.grad) {
-            g[0] += e[0];
-            g[1] += e[1];
+        for ((g, x), y) in grad.iter_mut().zip(&self.gx).zip(&self.gy) {
+            g[0] += x;
+            g[1] += y;
         }
         stats
     }
+}
+
+/// One axis of an evaluation: the positions (with the spare slot), the pins' offsets of a
+/// group, the gradient to add to, and `1/γ`.
+struct Axis<'a> {
+    p: &'a [f64],
+    off: &'a [f64],
+    grad: &'a mut [f64],
+    inv: f64,
+}
+
+/// WA of the two-pin nets on one axis in closed form: with `d = b − a` and `t = |d|/γ`,
+/// `WA = |d|·tanh(t/2)` and `∂WA/∂b = sign(d)·(tanh(t/2) + (t/2)·sech²(t/2))`, from
+/// `e = e^{−t}` (never overflows). Returns `(Σ w·WA, Σ w·|d|)`.
+///
+/// Three passes (gather, arithmetic, scatter) so that the arithmetic, which is one long
+/// dependency chain per net, runs four nets per instruction.
+#[inline(always)]
+fn two_pin_axis(g: &Group, ax: Axis<'_>, s: &mut Scratch) -> (f64, f64) {
+    let Axis { p, off, grad, inv } = ax;
+    let k = g.weight.len();
+    let (s0, s1) = g.slot.split_at(k);
+    let (o0, o1) = off.split_at(k);
+    for b in [&mut s.mid, &mut s.span, &mut s.ma, &mut s.mb] {
+        b.resize(k, 0.0);
+    }
+    let (d, gb, wa, hpwl) = (
+        &mut s.mid[..k],
+        &mut s.span[..k],
+        &mut s.ma[..k],
+        &mut s.mb[..k],
+    );
+    for (i, d) in d.iter_mut().enumerate() {
+        *d = (p[s1[i] as usize] + o1[i]) - (p[s0[i] as usize] + o0[i]);
+    }
+    for i in 0..k {
+        let ad = d[i].abs();
+        let t = ad * inv;
+        let e = exp_clamped(-t);
+        let q = 1.0 / (1.0 + e);
+        let th = (1.0 - e) * q;
+        let w = g.weight[i];
+        wa[i] = w * ad * th;
+        hpwl[i] = w * ad;
+        let v = w * (th + 2.0 * t * e * q * q);
+        gb[i] = if d[i] < 0.0 { -v } else { v };
+    }
+    for ((&a, &b), &v) in s0.iter().zip(s1).zip(gb.iter()) {
+        grad[b as usize] += v;
+        grad[a as usize] -= v;
+    }
+    (sum_lanes(wa), sum_lanes(hpwl))
+}
+
+/// WA of a group of nets of three or more pins on one axis; the nets too wide for one shared
+/// exponential are left out and listed in `wide`. Returns `(Σ w·WA, Σ w·HPWL)`.
+///
+/// WA is a ratio of sums, so the exponentials of a net may share any factor: `e^{(v−mid)/γ}`
+/// and its reciprocal serve both soft extremes with one exponential, as long as
+/// `|v − mid|/γ` stays in range.
+#[inline(always)]
+fn group_axis(
+    g: &Group,
+    ax: Axis<'_>,
+    s: &mut Scratch,
+    gi: usize,
+    wide: &mut Vec<(u32, u32)>,
+) -> (f64, f64) {
+    let Axis { p, off, grad, inv } = ax;
+    let (k, deg) = (g.weight.len(), g.deg);
+    let len = deg * k;
+    for b in [&mut s.v, &mut s.e, &mut s.r] {
+        b.resize(len, 0.0);
+    }
+    for b in [
+        &mut s.mid,
+        &mut s.span,
+        &mut s.ma,
+        &mut s.mb,
+        &mut s.ra,
+        &mut s.rb,
+    ] {
+        b.resize(k, 0.0);
+    }
+    s.wide.resize(k, false);
+    let (v, e, r) = (&mut s.v[..len], &mut s.e[..len], &mut s.r[..len]);
+    for ((v, &sl), &o) in v.iter_mut().zip(&g.slot).zip(off) {
+        *v = p[sl as usize] + o;
+    }
+    // Bounds: `mid` holds the maximum, `span` the minimum, until both are known.
+    let (hi, lo) = (&mut s.mid[..k], &mut s.span[..k]);
+    hi.copy_from_slice(&v[..k]);
+    lo.copy_from_slice(&v[..k]);
+    for vj in v[k..].chunks_exact(k) {
+        for ((h, l), &x) in hi.iter_mut().zip(lo.iter_mut()).zip(vj) {
+            *h = if x > *h { x } else { *h };
+            *l = if x < *l { x } else { *l };
+        }
+    }
+    s.net.resize(k, 0.0);
+    for (i, ((h, l), wd)) in hi
+        .iter_mut()
+        .zip(lo.iter_mut())
+        .zip(&mut s.wide[..k])
+        .enumerate()
+    {
+        let span = *h - *l;
+        s.net[i] = g.weight[i] * span;
+        *wd = span * inv > 2.0 * WIDE;
+        *h = 0.5 * (*h + *l);
+        *l = span;
+    }
+    let hpwl = sum_lanes(&s.net[..k]);
+    if s.wide[..k].iter().any(|&w| w) {
+        wide.extend(
+            s.wide[..k]
+                .iter()
+                .enumerate()
+                .filter(|&(_, &w)| w)
+                .map(|(i, _)| (gi as u32, i as u32)),
+        );
+    }
+    let mid = &s.mid[..k];
+    let (sa, ta, sb, tb) = (
+        &mut s.ma[..k],
+        &mut s.mb[..k],
+        &mut s.ra[..k],
+        &mut s.rb[..k],
+    );
+    for b in [&mut *sa, &mut *ta, &mut *sb, &mut *tb] {
+        b.iter_mut().for_each(|x| *x = 0.0);
+    }
+    for ((vj, ej), rj) in v
+        .chunks_exact(k)
+        .zip(e.chunks_exact_mut(k))
+        .zip(r.chunks_exact_mut(k))
+    {
+        for i in 0..k {
+            let x = vj[i];
+            let ea = exp_clamped((x - mid[i]) * inv);
+            let eb = 1.0 / ea;
+            ej[i] = ea;
+            rj[i] = eb;
+            sa[i] += ea;
+            ta[i] += x * ea;
+            sb[i] += eb;
+            tb[i] += x * eb;
+        }
+    }
+    // Soft extremes, WA and the gradient's factors; zero for the wide nets.
+    let wa = &mut s.net[..k];
+    for i in 0..k {
+        let (isa, isb) = (1.0 / sa[i], 1.0 / sb[i]);
+        let (ma, mb) = (ta[i] * isa, tb[i] * isb);
+        let w = if s.wide[i] { 0.0 } else { g.weight[i] };
+        wa[i] = if s.wide[i] { 0.0 } else { w * (ma - mb) };
+        // `sa`, `sb` become the gradient's factors, `ta`, `tb` the soft extremes.
+        ta[i] = ma;
+        tb[i] = mb;
+        sa[i] = w * isa;
+        sb[i] = w * isb;
+    }
+    // The gradient per pin (over `e`), then the scatter: apart, the arithmetic vectorizes.
+    let wide = &s.wide[..k];
+    for (j, vj) in v.chunks_exact(k).enumerate() {
+        let (ej, rj) = (&mut e[j * k..(j + 1) * k], &r[j * k..(j + 1) * k]);
+        for i in 0..k {
+            let x = vj[i];
+            let d = sa[i] * ej[i] * (1.0 + (x - ta[i]) * inv)
+                - sb[i] * rj[i] * (1.0 - (x - tb[i]) * inv);
+            ej[i] = if wide[i] { 0.0 } else { d };
+        }
+    }
+    for (&sl, &d) in g.slot.iter().zip(e.iter()) {
+        grad[sl as usize] += d;
+    }
+    (sum_lanes(wa), hpwl)
+}
+
+/// `Σ v` in four lanes (so that it vectorizes, the same on every build).
+#[inline(always)]
+fn sum_lanes(v: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let chunks = v.chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for (a, x) in acc.iter_mut().zip(c) {
+            *a += x;
+        }
+    }
+    for (a, x) in acc.iter_mut().zip(rest) {
+        *a += x;
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3])
 }
 
 /// `(max, min)` of a non-empty slice.
@@ -355,9 +636,10 @@ mod tests {
     }
 
     #[test]
-    fn the_avx2_build_gives_the_same_bits_as_the_generic_one() {
+    fn the_vector_builds_give_the_same_bits_as_the_generic_one() {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
             let pos: Vec<[f64; 2]> = (0..40)
                 .map(|k| [(k * 37 % 101) as f64 * 0.7, (k * 53 % 89) as f64 * 0.3])
                 .collect();
@@ -373,10 +655,17 @@ mod tests {
             for gamma in [0.01, 0.7, 25.0] {
                 let (mut g1, mut g2) = (vec![[0.0; 2]; 40], vec![[0.0; 2]; 40]);
                 let s1 = nets.evaluate_generic(&pos, gamma, &mut g1);
-                // SAFETY: the CPU has AVX2 (checked above).
+                // SAFETY: the CPU has AVX2 and FMA (checked above).
                 let s2 = unsafe { nets.evaluate_avx2(&pos, gamma, &mut g2) };
                 assert_eq!(s1, s2);
                 assert_eq!(g1, g2);
+                if std::arch::is_x86_feature_detected!("avx512f") {
+                    let mut g3 = vec![[0.0; 2]; 40];
+                    // SAFETY: the CPU has AVX-512F (checked just above).
+                    let s3 = unsafe { nets.evaluate_avx512(&pos, gamma, &mut g3) };
+                    assert_eq!(s1, s3);
+                    assert_eq!(g1, g3);
+                }
             }
         }
     }
