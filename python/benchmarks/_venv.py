@@ -33,8 +33,17 @@ def enter(venv_name: str, requirements: list[str], wheel: str | None) -> None:
     The wheel is reinstalled on every entry (it is what is being measured, and a rebuilt one
     keeps its file name); the requirements only when the venv is new.
     """
+    if not _inside(venv_name):
+        _enter(venv_name, requirements, Path(wheel).resolve() if wheel else _newest_wheel())
+
+
+def _inside(venv_name: str) -> bool:
+    return Path(sys.prefix).resolve() == (CACHE / venv_name).resolve()
+
+
+def _enter(venv_name: str, requirements: list[str], wheel: Path | None) -> None:
     venv = CACHE / venv_name
-    if Path(sys.prefix).resolve() == venv.resolve():
+    if _inside(venv_name):
         return
     python = venv / "bin" / "python"
     pip = [str(python), "-m", "pip", "install", "-q"]
@@ -42,9 +51,14 @@ def enter(venv_name: str, requirements: list[str], wheel: str | None) -> None:
         subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
         subprocess.run([*pip, "--upgrade", "pip"], check=True)
         subprocess.run([*pip, *requirements], check=True)
-    whl = Path(wheel).resolve() if wheel else _newest_wheel()
-    subprocess.run([*pip, "--force-reinstall", "--no-deps", str(whl)], check=True)
+    if wheel is not None:
+        subprocess.run([*pip, "--force-reinstall", "--no-deps", str(wheel)], check=True)
     os.execv(str(python), [str(python), *sys.argv])
+
+
+def enter_without_wheel(venv_name: str, requirements: list[str]) -> None:
+    """:func:`enter` for a script that measures no wheel."""
+    _enter(venv_name, requirements, None)
 
 
 def pin_one_core() -> int | None:

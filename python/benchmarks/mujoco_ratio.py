@@ -16,16 +16,23 @@ contacts only (as ours). Bare physics: ``mj_step`` with a fixed standing action,
 reset). Our side: ``A2PerfEnv("QuadrupedLocomotion-DogPace-v0")`` stepped from Python with the
 zero action (the default pose), observation, reward, PD control and resets included.
 
-Both run in this process, pinned to one core, one thread each, in alternating rounds; the rates
-are per second of this thread's CPU time (what a shared machine's load distorts least) and of
-wall time, medians over rounds. Prints one JSON object with both rates, the ratio
-(ours / MuJoCo) and the load average.
+Both run in this process, pinned to one core, one thread each, in alternating rounds. Three rates
+per side, medians over rounds: per second of this thread's CPU time, per wall second, and one
+over the median env step (``ratio_step_median``, the headline: preemption on a loaded machine
+inflates a few steps, not the median; resets are not steps). Prints one JSON object with the
+rates, the ratios (ours / MuJoCo) and the load average.
+
+``--a2perf PATH`` times ours with that binary's ``a2perf bench`` instead (its native loop, uniform
+random actions, which topple the robot every ~10 steps so resets are frequent; no wheel needed,
+no CPU-time rate), in a child process pinned to the same core.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -101,9 +108,13 @@ class Mujoco:
         self.data.ctrl[:] = pose
         mujoco.mj_forward(self.model, self.data)
 
-    def run(self, steps: int) -> None:
+    def run(self, steps: int) -> list[float]:
+        lat, clock, step = [], time.perf_counter, self.mujoco.mj_step
         for _ in range(steps):
-            self.mujoco.mj_step(self.model, self.data, SUBSTEPS)
+            t = clock()
+            step(self.model, self.data, SUBSTEPS)
+            lat.append(clock() - t)
+        return lat
 
     def trunk_height(self) -> float:
         return float(self.data.qpos[2])
@@ -119,20 +130,45 @@ class Ours:
         self.env.reset(seed=0)
         self.resets = 0
 
-    def run(self, steps: int) -> None:
-        env, action = self.env, self.action
+    def run(self, steps: int) -> list[float]:
+        env, action, lat, clock = self.env, self.action, [], time.perf_counter
         for _ in range(steps):
+            t = clock()
             _, _, term, trunc, _ = env.step(action)
+            lat.append(clock() - t)
             if term or trunc:
                 env.reset()
                 self.resets += 1
+        return lat
 
 
-def timed(sim, steps: int) -> tuple[float, float]:
-    """(env steps per CPU-second of this thread, per wall-second)."""
+class OursCli:
+    """`a2perf bench` (native loop, uniform random actions, resets included in its wall rate),
+    for a binary built from a tree whose wheel is not at hand."""
+
+    def __init__(self, binary: str) -> None:
+        self.binary = binary
+        self.resets = 0
+        self.round = 0
+
+    def bench(self, steps: int) -> dict:
+        self.round += 1
+        out = subprocess.run([self.binary, "bench", DOG, "--steps", str(steps), "--seed",
+                              str(self.round), "--json"], check=True, capture_output=True, text=True)
+        report = json.loads(out.stdout)
+        self.resets += report["episodes"] - 1
+        return report
+
+
+def timed(sim, steps: int) -> tuple[float | None, float, float]:
+    """(env steps per CPU-second, per wall-second, median seconds of one env step). The median
+    step is what preemption on a loaded machine distorts least; resets are not steps."""
+    if isinstance(sim, OursCli):
+        r = sim.bench(steps)
+        return None, r["steps_per_second"], r["step_latency_us"]["p50"] * 1e-6
     c, w = time.thread_time(), time.perf_counter()
-    sim.run(steps)
-    return steps / (time.thread_time() - c), steps / (time.perf_counter() - w)
+    lat = sim.run(steps)
+    return steps / (time.thread_time() - c), steps / (time.perf_counter() - w), statistics.median(lat)
 
 
 def main() -> None:
@@ -140,36 +176,48 @@ def main() -> None:
     ap.add_argument("--wheel", help="a2perf_rs wheel to measure (default: newest in dist/)")
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--steps", type=int, default=1000, help="env steps per round and side")
+    ap.add_argument("--a2perf", help="time ours with this binary's `a2perf bench` (random "
+                    "actions, native loop) instead of the wheel")
     args = ap.parse_args()
-    _venv.enter("bench-venv", ["mujoco", "numpy", "gymnasium"], args.wheel)
+    if args.a2perf:
+        args.a2perf = str(Path(args.a2perf).resolve())
+        _venv.enter_without_wheel("bench-venv", ["mujoco", "numpy", "gymnasium"])
+    else:
+        _venv.enter("bench-venv", ["mujoco", "numpy", "gymnasium"], args.wheel)
 
     import mujoco
 
     cpu = _venv.pin_one_core()
     load_before = _venv.load_average()
-    sims = {"mujoco": Mujoco(), "ours": Ours()}
+    sims = {"mujoco": Mujoco(), "ours": OursCli(args.a2perf) if args.a2perf else Ours()}
     for sim in sims.values():  # warm-up
-        sim.run(50)
-    cpu_rate: dict[str, list[float]] = {k: [] for k in sims}
-    wall_rate: dict[str, list[float]] = {k: [] for k in sims}
+        timed(sim, 50)
+    rates: dict[str, dict[str, list]] = {k: {"cpu": [], "wall": [], "p50": []} for k in sims}
     for r in range(args.rounds):
         # Alternate which side goes first, so a drift of the machine's speed hits both alike.
         for name in sorted(sims, reverse=r % 2 == 1):
-            c, w = timed(sims[name], args.steps)
-            cpu_rate[name].append(c)
-            wall_rate[name].append(w)
-    cpu_s = {k: _venv.summary(v) for k, v in cpu_rate.items()}
-    wall_s = {k: _venv.summary(v) for k, v in wall_rate.items()}
+            c, w, p50 = timed(sims[name], args.steps)
+            rates[name]["cpu"].append(c)
+            rates[name]["wall"].append(w)
+            rates[name]["p50"].append(1.0 / p50)
+    cpu_s = {k: _venv.summary(v["cpu"]) if None not in v["cpu"] else None for k, v in rates.items()}
+    wall_s = {k: _venv.summary(v["wall"]) for k, v in rates.items()}
+    step_s = {k: _venv.summary(v["p50"]) for k, v in rates.items()}
     print(json.dumps({
-        "what": "env steps/s on one core: ours (DogPace, zero action, obs+reward+PD+resets) vs "
-                "MuJoCo bare physics (12-actuator quadruped, 1 ms x 33 mj_step, fixed action)",
+        "what": "env steps/s on one core: ours (DogPace, " + (
+            "`a2perf bench`, random actions" if args.a2perf else "wheel, zero action") +
+            ", obs+reward+PD; resets in the wall rates) vs MuJoCo bare physics (12-actuator "
+            "quadruped, 1 ms x 33 mj_step, fixed action)",
+        "ratio_step_median": step_s["ours"]["median"] / step_s["mujoco"]["median"],
         "mujoco_version": mujoco.__version__,
         "cpu": cpu,
         "rounds": args.rounds,
         "steps_per_round": args.steps,
         "ours_per_cpu_s": cpu_s["ours"],
         "mujoco_per_cpu_s": cpu_s["mujoco"],
-        "ratio_cpu": cpu_s["ours"]["median"] / cpu_s["mujoco"]["median"],
+        "ratio_cpu": cpu_s["ours"]["median"] / cpu_s["mujoco"]["median"] if cpu_s["ours"] else None,
+        "ours_per_median_step": step_s["ours"],
+        "mujoco_per_median_step": step_s["mujoco"],
         "ours_per_wall_s": wall_s["ours"],
         "mujoco_per_wall_s": wall_s["mujoco"],
         "ratio_wall": wall_s["ours"]["median"] / wall_s["mujoco"]["median"],
