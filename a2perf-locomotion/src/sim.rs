@@ -336,6 +336,9 @@ impl Simulation {
         let params = IntegrationParameters {
             dt: config.dt as f32,
             num_solver_iterations: config.solver_iterations.max(1),
+            // No CCD: at 1 ms substeps no link moves its own size in a step, so the sweep never
+            // fires, yet its per-body bookkeeping cost ~12% of a step. Results are bit-identical.
+            max_ccd_substeps: 0,
             ..IntegrationParameters::default()
         };
         let mut sim = Self {
