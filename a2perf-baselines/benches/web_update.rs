@@ -5,7 +5,8 @@
 //!
 //! Run with `cargo bench -p a2perf-baselines --bench web_update`. Besides criterion's wall
 //! time it prints the median on-CPU time of the update thread (from
-//! `/proc/thread-self/schedstat`, Linux only), which a loaded machine disturbs less.
+//! `/proc/thread-self/schedstat`, Linux only, over rounds of updates), which a loaded machine
+//! disturbs less.
 
 use std::collections::BTreeMap;
 use std::hint::black_box;
@@ -17,6 +18,8 @@ use a2perf_core::{Registry, RngStream, Value};
 use criterion::{Criterion, criterion_group, criterion_main};
 
 const BATCH: usize = 256;
+/// Updates per timed round of thread CPU time.
+const ROUND: usize = 40;
 
 /// Nanoseconds this thread has run on a CPU, when the kernel says.
 fn thread_cpu_ns() -> Option<u64> {
@@ -95,30 +98,39 @@ fn web_update(c: &mut Criterion) {
         net.forward(&p, &next);
         target.forward(&target_p, &next);
         net.forward(&p, &obs);
-        dq.fill(0.0);
         for (k, &a) in actions.iter().enumerate() {
             let err = net.logits()[k * n + a] - target.logits()[k * n + a];
             dq[k * n + a] = 2.0 * err / BATCH as f32;
         }
         grads.fill(0.0);
         net.backward(&p, &mut grads, &obs, &dq, None);
+        // As the DDQN learner: clear the entries set, keeping `dq` zero between updates.
+        for (k, &a) in actions.iter().enumerate() {
+            dq[k * n + a] = 0.0;
+        }
         adam.step(&mut p, &grads, 4e-5);
         black_box(&p);
     };
+    // The kernel may account thread time in scheduler ticks (4 ms here), so time rounds of
+    // updates and report the median round's mean.
     let mut cpu = Vec::new();
-    for _ in 0..15 {
+    for _ in 0..7 {
         let t0 = thread_cpu_ns();
-        update();
+        for _ in 0..ROUND {
+            update();
+        }
         if let (Some(a), Some(b)) = (t0, thread_cpu_ns()) {
-            cpu.push(b - a);
+            cpu.push((b - a) as f64 / ROUND as f64);
         }
     }
     if !cpu.is_empty() {
-        cpu.sort_unstable();
+        cpu.sort_by(f64::total_cmp);
         eprintln!(
-            "ddqn_update/web_paper_dims_batch_256: median thread CPU {:.2} ms over {} updates",
-            cpu[cpu.len() / 2] as f64 / 1e6,
-            cpu.len()
+            "ddqn_update/web_paper_dims_batch_256: thread CPU per update, median of {} rounds of \
+             {ROUND}: {:.2} ms (rounds {:.2?} ms)",
+            cpu.len(),
+            cpu[cpu.len() / 2] / 1e6,
+            cpu.iter().map(|c| c / 1e6).collect::<Vec<_>>()
         );
     }
     c.bench_function("ddqn_update/web_paper_dims_batch_256", |b| {

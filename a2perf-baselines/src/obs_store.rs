@@ -508,8 +508,12 @@ impl ObsStore {
     pub(crate) fn read_mask(&self, slot: usize, out: &mut ObsBatch, row: usize) {
         if let Some(m) = out.mask_mut(row) {
             let bits = &self.mask[slot * self.words..(slot + 1) * self.words];
-            for (a, legal) in m.iter_mut().enumerate() {
-                *legal = (bits[a / 64] >> (a % 64)) & 1 == 1;
+            // Word by word: a web observation's mask has 12,500 actions and a replay minibatch
+            // decodes hundreds of them per update.
+            for (chunk, word) in m.chunks_mut(64).zip(bits) {
+                for (j, legal) in chunk.iter_mut().enumerate() {
+                    *legal = (word >> j) & 1 == 1;
+                }
             }
         }
     }

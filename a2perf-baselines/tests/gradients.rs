@@ -391,5 +391,15 @@ proptest! {
         close(&gd, &gp, "gradient")?;
         // The gradients are not trivially equal: some are non-zero.
         prop_assert!(gd.iter().any(|g| g.abs() > 1e-3));
+        // New parameters after a forward with the old ones: the projected tables the
+        // network keeps for unchanged parameters must be rebuilt when any one weight changes.
+        for _ in 0..6 {
+            let i = rng.index(p.len());
+            p[i] += 0.5;
+            direct.forward(&p, &batch);
+            projected.forward(&p, &batch);
+            close(direct.logits(), projected.logits(), "logit after a parameter change")?;
+            close(direct.values(), projected.values(), "value after a parameter change")?;
+        }
     }
 }

@@ -72,8 +72,10 @@ pub(super) struct WebWs {
     /// Direct-path MLP inputs, fields and elements.
     fin: Vec<f32>,
     ein: Vec<f32>,
-    /// Projected tables `[slots, vocab, latent]`, and their gradients in the backward pass.
-    tab: Vec<f32>,
+    /// Projected tables of the field and the element MLP.
+    proj: [Projection; 2],
+    /// Gradients of a projected table (backward scratch).
+    dtab: Vec<f32>,
     /// Type terms of the active fields / elements `[n, 2]`, and their gradients.
     tf: Vec<f32>,
     te: Vec<f32>,
@@ -143,36 +145,73 @@ impl<'a> Groups<'a> {
         r * self.width + k
     }
 
-    fn tokens(&self, i: usize, s: usize) -> &'a [i32] {
-        let src = self.sources[s / self.slots_per_source];
-        let at = (self.item(i) * self.slots_per_source + s % self.slots_per_source) * self.t;
-        &src[at..at + self.t]
+    /// Row `i`'s token groups, in slot order.
+    fn slot_tokens(&self, i: usize) -> impl Iterator<Item = &'a [i32]> + use<'a> {
+        let (item, t) = (self.item(i), self.t);
+        let n = self.slots_per_source * t;
+        self.sources
+            .iter()
+            .flat_map(move |src| src[item * n..(item + 1) * n].chunks_exact(t))
     }
 
     fn dense(&self, i: usize) -> &'a [f32] {
         let at = self.item(i) * self.dense_w;
         &self.dense[at..at + self.dense_w]
     }
-
-    /// Number of non-padding tokens of group `(i, s)`.
-    fn count(&self, embed: &Embedding, i: usize, s: usize) -> usize {
-        self.tokens(i, s)
-            .iter()
-            .filter(|t| embed.row(**t).is_some())
-            .count()
-    }
 }
 
-/// `P_s = E W_sᵀ` for every slot into `tab` `[slots, vocab, l]`.
-fn project(embed: &Embedding, layer: &Linear, slots: usize, params: &[f32], tab: &mut Vec<f32>) {
-    let (v, d, l) = (embed.vocab, embed.dim, layer.out);
-    ensure(tab, slots * v * l);
-    let e = MatRef::from_row_major_slice(&params[embed.offset..embed.offset + v * d], v, d);
-    let w = MatRef::from_row_major_slice(&params[layer.w_range()], l, layer.inp);
-    for (s, p) in tab[..slots * v * l].chunks_exact_mut(v * l).enumerate() {
-        let p = MatMut::from_row_major_slice_mut(p, v, l);
-        let ws = w.submatrix(0, s * d, l, d);
-        matmul(p, Accum::Replace, e, ws.transpose(), 1.0f32, Par::Seq);
+/// `1 / count` of a token group's non-padding tokens (ids above 0, as [`Embedding`] counts
+/// them), or `None` for an all-padding group (which contributes nothing).
+fn inv_count(tokens: &[i32]) -> Option<f32> {
+    let count = tokens.iter().filter(|&&t| t > 0).count();
+    (count > 0).then(|| 1.0 / count as f32)
+}
+
+/// The projected tables of one MLP's first layer, `P_s = E W_sᵀ` for every slot
+/// (`[slots, vocab, l]`) followed by the dense features' weights transposed (`[dense, l]`),
+/// and the parameters they were built from. A forward pass with bit-identical parameters (the
+/// DDQN target network between its updates, the online network's second forward of an update)
+/// reuses them instead of repeating the GEMMs; the result is the same either way.
+#[derive(Clone, Debug, Default)]
+struct Projection {
+    tab: Vec<f32>,
+    key: Vec<f32>,
+}
+
+impl Projection {
+    fn update(&mut self, embed: &Embedding, layer: &Linear, g: &Groups<'_>, params: &[f32]) {
+        let (v, d, l, inp) = (embed.vocab, embed.dim, layer.out, layer.inp);
+        let slots = g.slots();
+        let table = &params[embed.offset..embed.offset + v * d];
+        let weights = &params[layer.w_range()];
+        let bits = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+        let (kt, kw) = self.key.split_at(self.key.len().min(table.len()));
+        let tab_len = (slots * v + g.dense_w) * l;
+        if self.key.len() == table.len() + weights.len()
+            && self.tab.len() >= tab_len
+            && bits(kt, table)
+            && bits(kw, weights)
+        {
+            return;
+        }
+        self.key.clear();
+        self.key.extend_from_slice(table);
+        self.key.extend_from_slice(weights);
+        ensure(&mut self.tab, tab_len);
+        let e = MatRef::from_row_major_slice(table, v, d);
+        let w = MatRef::from_row_major_slice(weights, l, inp);
+        let (p, dense) = self.tab[..tab_len].split_at_mut(slots * v * l);
+        for (s, p) in p.chunks_exact_mut(v * l).enumerate() {
+            let p = MatMut::from_row_major_slice_mut(p, v, l);
+            let ws = w.submatrix(0, s * d, l, d);
+            matmul(p, Accum::Replace, e, ws.transpose(), 1.0f32, Par::Seq);
+        }
+        let base = slots * d;
+        for (k, row) in dense.chunks_exact_mut(l).enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = weights[j * inp + base + k];
+            }
+        }
     }
 }
 
@@ -185,27 +224,31 @@ fn projected_forward(
     tab: &[f32],
     out: &mut [f32],
 ) {
-    let (v, l, inp) = (embed.vocab, layer.out, layer.inp);
-    let base = g.slots() * embed.dim;
-    let w = &params[layer.w_range()];
+    let (v, l) = (embed.vocab, layer.out);
+    let (p, dense_t) = tab.split_at(g.slots() * v * l);
     let bias = &params[layer.b_range()];
     for (i, o) in out.chunks_exact_mut(l).take(g.rows()).enumerate() {
-        o.copy_from_slice(bias);
         let x = g.dense(i);
-        if !x.is_empty() {
-            for (j, o) in o.iter_mut().enumerate() {
-                let wr = &w[j * inp + base..j * inp + base + x.len()];
-                *o += wr.iter().zip(x).map(|(a, b)| a * b).sum::<f32>();
+        if x.is_empty() {
+            o.copy_from_slice(bias);
+        } else {
+            // bias_j + Σ_k w_jk x_k with each sum in k order from -0.0 (as `Iterator::sum`),
+            // vectorized over j through the transposed weights.
+            o.fill(-0.0);
+            for (x, wt) in x.iter().zip(dense_t.chunks_exact(l)) {
+                for (o, w) in o.iter_mut().zip(wt) {
+                    *o += w * x;
+                }
+            }
+            for (o, b) in o.iter_mut().zip(bias) {
+                *o += b;
             }
         }
-        for s in 0..g.slots() {
-            let count = g.count(embed, i, s);
-            if count == 0 {
+        for (toks, p) in g.slot_tokens(i).zip(p.chunks_exact(v * l)) {
+            let Some(inv) = inv_count(toks) else {
                 continue;
-            }
-            let inv = 1.0 / count as f32;
-            let p = &tab[s * v * l..(s + 1) * v * l];
-            for r in g.tokens(i, s).iter().filter_map(|t| embed.row(*t)) {
+            };
+            for r in toks.iter().filter_map(|t| embed.row(*t)) {
                 for (o, x) in o.iter_mut().zip(&p[r * l..(r + 1) * l]) {
                     *o += x * inv;
                 }
@@ -215,21 +258,21 @@ fn projected_forward(
 }
 
 /// Backward of [`projected_forward`] given the pre-activation gradient `dh` `[rows, l]`:
-/// accumulates the layer's and the embedding table's gradients (`tab` is scratch for `dP`).
+/// accumulates the layer's and the embedding table's gradients (`dtab` is scratch for `dP`).
 fn projected_backward(
     embed: &Embedding,
     layer: &Linear,
     g: &Groups<'_>,
     params: &[f32],
     grads: &mut [f32],
-    tab: &mut Vec<f32>,
+    dtab: &mut Vec<f32>,
     dh: &[f32],
 ) {
     let (v, d, l, inp) = (embed.vocab, embed.dim, layer.out, layer.inp);
     let slots = g.slots();
     let base = slots * d;
-    ensure(tab, slots * v * l);
-    let dp = &mut tab[..slots * v * l];
+    ensure(dtab, slots * v * l);
+    let dp = &mut dtab[..slots * v * l];
     dp.fill(0.0);
     {
         let gw = &mut grads[layer.w_range()];
@@ -243,14 +286,11 @@ fn projected_backward(
                     }
                 }
             }
-            for s in 0..slots {
-                let count = g.count(embed, i, s);
-                if count == 0 {
+            for (toks, p) in g.slot_tokens(i).zip(dp.chunks_exact_mut(v * l)) {
+                let Some(inv) = inv_count(toks) else {
                     continue;
-                }
-                let inv = 1.0 / count as f32;
-                let p = &mut dp[s * v * l..(s + 1) * v * l];
-                for r in g.tokens(i, s).iter().filter_map(|t| embed.row(*t)) {
+                };
+                for r in toks.iter().filter_map(|t| embed.row(*t)) {
                     for (a, y) in p[r * l..(r + 1) * l].iter_mut().zip(dy) {
                         *a += y * inv;
                     }
@@ -293,14 +333,13 @@ fn encode<'w>(
     projected: bool,
     params: &[f32],
     x: &mut Vec<f32>,
-    tab: &mut Vec<f32>,
+    proj: &mut Projection,
     ws: &'w mut MlpWs,
 ) -> &'w [f32] {
     let rows = g.rows();
     if projected {
-        let first = &mlp.layers[0];
-        project(embed, first, g.slots(), params, tab);
-        let tab = &tab[..];
+        proj.update(embed, &mlp.layers[0], g, params);
+        let tab = &proj.tab[..];
         return mlp.forward_with_first(params, rows, ws, |layer, out| {
             projected_forward(embed, layer, g, params, tab, out)
         });
@@ -309,8 +348,8 @@ fn encode<'w>(
     let base = g.slots() * d;
     ensure(x, rows * inp);
     for (i, o) in x.chunks_exact_mut(inp).take(rows).enumerate() {
-        for s in 0..g.slots() {
-            embed.pool(params, g.tokens(i, s), g.t, &mut o[s * d..(s + 1) * d]);
+        for (toks, o) in g.slot_tokens(i).zip(o.chunks_exact_mut(d)) {
+            embed.pool(params, toks, g.t, o);
         }
         o[base..].copy_from_slice(g.dense(i));
     }
@@ -328,22 +367,22 @@ fn encode_backward(
     grads: &mut [f32],
     dout: &[f32],
     x: &[f32],
-    tab: &mut Vec<f32>,
+    dtab: &mut Vec<f32>,
     dx: &mut Vec<f32>,
     ws: &mut MlpWs,
 ) {
     let rows = g.rows();
     if projected {
         let dh = mlp.backward_to_first(params, grads, dout, ws);
-        projected_backward(embed, &mlp.layers[0], g, params, grads, tab, dh);
+        projected_backward(embed, &mlp.layers[0], g, params, grads, dtab, dh);
         return;
     }
     let (d, inp) = (embed.dim, mlp.inp());
     ensure(dx, rows * inp);
     mlp.backward(params, grads, x, dout, ws, Some(&mut dx[..rows * inp]));
     for (i, dxi) in dx.chunks_exact(inp).take(rows).enumerate() {
-        for s in 0..g.slots() {
-            embed.pool_backward(grads, g.tokens(i, s), g.t, &dxi[s * d..(s + 1) * d]);
+        for (toks, dxs) in g.slot_tokens(i).zip(dxi.chunks_exact(d)) {
+            embed.pool_backward(grads, toks, g.t, dxs);
         }
     }
 }
@@ -516,7 +555,7 @@ pub(super) fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mu
     } = ws;
     let mut fin = std::mem::take(&mut web.fin);
     let mut ein = std::mem::take(&mut web.ein);
-    let mut tab = std::mem::take(&mut web.tab);
+    let [mut proj_f, mut proj_e] = std::mem::take(&mut web.proj);
     let active = [&web.active_f[..], &web.active_e[..]];
     let (fg, eg) = w.groups(batch, active, &field_src, &elem_src);
     let pf = web.path.projects(&fg, &w.embed, l);
@@ -528,7 +567,7 @@ pub(super) fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mu
         pf,
         params,
         &mut fin,
-        &mut tab,
+        &mut proj_f,
         a,
     );
     let ee = encode(
@@ -538,14 +577,14 @@ pub(super) fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mu
         pe,
         params,
         &mut ein,
-        &mut tab,
+        &mut proj_e,
         wb,
     );
     let (caf, cae) = (fg.rows(), eg.rows());
     web.projected = [pf, pe];
     web.fin = fin;
     web.ein = ein;
-    web.tab = tab;
+    web.proj = [proj_f, proj_e];
     let WebWs {
         active_f,
         active_e,
@@ -574,8 +613,13 @@ pub(super) fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mu
             tr[f * 2..f * 2 + 2].copy_from_slice(&tf[(f0 + i) * 2..(f0 + i) * 2 + 2]);
         }
         let lg = &mut logits[r * n..(r + 1) * n];
-        for chunk in lg.chunks_exact_mut(nf * 2) {
-            chunk.copy_from_slice(tr);
+        // Doubling copies: a few large moves instead of one small copy per element.
+        lg[..nf * 2].copy_from_slice(tr);
+        let mut filled = nf * 2;
+        while filled < n {
+            let m = filled.min(n - filled);
+            lg.copy_within(..m, filled);
+            filled += m;
         }
         if ner == 0 {
             continue;
@@ -645,7 +689,7 @@ pub(super) fn web_backward(
     let Ws {
         a, b: wb, c, web, ..
     } = ws;
-    let mut tab = std::mem::take(&mut web.tab);
+    let mut dtab = std::mem::take(&mut web.dtab);
     let mut dx = std::mem::take(&mut web.dx);
     let mut dfe = std::mem::take(&mut web.dfe);
     let mut dee = std::mem::take(&mut web.dee);
@@ -748,11 +792,11 @@ pub(super) fn web_backward(
             *o += x;
         }
         #[rustfmt::skip]
-        encode_backward(&w.embed, &w.field_mlp, &fg, pf, params, grads, &dfe, fin, &mut tab, &mut dx, a);
+        encode_backward(&w.embed, &w.field_mlp, &fg, pf, params, grads, &dfe, fin, &mut dtab, &mut dx, a);
         #[rustfmt::skip]
-        encode_backward(&w.embed, &w.elem_mlp, &eg, pe, params, grads, &dee, ein, &mut tab, &mut dx, wb);
+        encode_backward(&w.embed, &w.elem_mlp, &eg, pe, params, grads, &dee, ein, &mut dtab, &mut dx, wb);
     }
-    web.tab = tab;
+    web.dtab = dtab;
     web.dx = dx;
     web.dfe = dfe;
     web.dee = dee;
