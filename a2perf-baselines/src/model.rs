@@ -7,13 +7,13 @@
 //! | web (`profile_*`, `dom_*`, `Discrete(E·F·2)`) | token embeddings (`embedding_dim`, paper 100) mean-pooled per attribute; element MLP over the 5 pooled attributes + 8 DOM features → `latent_dim` (paper 50); field MLP over pooled key + value → `latent_dim`; logit(e, f, k) = ⟨field_f, element_e⟩ + type_k(element_e) + type_k(field_f); value MLP on the mean element and mean field embeddings | sonnet `WebLSTMEncoder`: same embedding/latent sizes and the same dot-product + action-type logits; an LSTM runs over the DOM sequence. We drop the LSTM (elements are scored independently plus their 8 geometry/state features), which keeps inference allocation-free and fast. |
 
 use a2perf_core::{EnvSpec, PolicyError, RngStream, Space};
-use faer::linalg::matmul::matmul;
-use faer::{Accum, MatMut, MatRef, Par};
 use serde::{Deserialize, Serialize};
 
 use crate::batch::{ObsBatch, ObsLayout};
-use crate::nn::embed::Embedding;
 use crate::nn::{Activation, Linear, Mlp, MlpWs, ParamAlloc, ensure};
+
+mod web;
+pub use web::{WebArch, WebPath};
 
 /// Network choices shared by every algorithm (hyperparameters).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -66,24 +66,6 @@ pub struct CircuitArch {
     value: Option<Mlp>,
 }
 
-/// Web navigation DOM–profile network (see the module table).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct WebArch {
-    /// Tensor indices: profile_keys, profile_values, profile_mask, dom_tokens, dom_features, dom_mask.
-    idx: [usize; 6],
-    fields: usize,
-    elements: usize,
-    tokens: usize,
-    attrs: usize,
-    dom_feats: usize,
-    embed: Embedding,
-    field_mlp: Mlp,
-    elem_mlp: Mlp,
-    type_e: Linear,
-    type_f: Linear,
-    value: Option<Mlp>,
-}
-
 /// Which network computes the logits.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum DiscreteArch {
@@ -109,8 +91,7 @@ struct Ws {
     b: MlpWs,
     c: MlpWs,
     v: [Vec<f32>; 12],
-    active_f: Vec<(usize, usize)>,
-    active_e: Vec<(usize, usize)>,
+    web: web::WebWs,
     batch: usize,
 }
 
@@ -163,7 +144,7 @@ impl DiscreteNet {
         let auto = opts.architecture == "auto";
         let arch = if let (true, Some(a)) = (
             auto,
-            web_arch(spec, layout, opts, n, with_value, &mut alloc),
+            web::web_arch(spec, layout, opts, n, with_value, &mut alloc),
         ) {
             a
         } else if let (true, Some(a)) = (
@@ -257,6 +238,24 @@ impl DiscreteNet {
         p
     }
 
+    /// Chooses how the web network computes its first layers ([`WebPath`]; the default picks
+    /// the cheaper for each batch). Both paths agree up to float rounding; tests and benches
+    /// compare them. Other networks ignore it.
+    ///
+    /// ```
+    /// use a2perf_baselines::model::{DiscreteArch, DiscreteNet, WebPath};
+    /// use a2perf_baselines::nn::{Activation, Mlp, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let policy = Mlp::new(&mut alloc, &[2, 3], Activation::Relu);
+    /// let flat = DiscreteArch::Flat { policy, value: None };
+    /// let mut net = DiscreteNet::from_arch(flat, 3, alloc.len());
+    /// net.set_web_path(WebPath::Direct); // the reference path, for a web network
+    /// assert_eq!(net.kind(), "mlp");
+    /// ```
+    pub fn set_web_path(&mut self, path: WebPath) {
+        self.ws.web.path = path;
+    }
+
     /// Logits of the last forward pass, `[B, n]` (unmasked).
     pub fn logits(&self) -> &[f32] {
         &self.ws.logits[..self.ws.batch * self.n]
@@ -287,7 +286,7 @@ impl DiscreteNet {
                 }
             }
             DiscreteArch::Circuit(c) => circuit_forward(c, params, batch, ws),
-            DiscreteArch::Web(w) => web_forward(w, params, batch, ws),
+            DiscreteArch::Web(w) => web::web_forward(w, params, batch, ws),
         }
     }
 
@@ -313,7 +312,9 @@ impl DiscreteNet {
             DiscreteArch::Circuit(c) => {
                 circuit_backward(c, params, grads, batch, ws, dlogits, dvalues)
             }
-            DiscreteArch::Web(w) => web_backward(w, params, grads, batch, ws, dlogits, dvalues),
+            DiscreteArch::Web(w) => {
+                web::web_backward(w, params, grads, batch, ws, dlogits, dvalues)
+            }
         }
     }
 }
@@ -329,7 +330,7 @@ impl DiscreteArch {
             DiscreteArch::Circuit(c) => {
                 !layout.is_integer(c.features) && !layout.is_integer(c.grid)
             }
-            DiscreteArch::Web(w) => web_dtypes_fit(layout, &w.idx),
+            DiscreteArch::Web(w) => w.dtypes_fit(layout),
         };
         if fits {
             Ok(())
@@ -592,349 +593,6 @@ fn circuit_backward(
     }
     c.global
         .backward(params, grads, batch.tensor(c.features), dg, &mut ws.a, None);
-}
-
-fn web_arch(
-    spec: &EnvSpec,
-    layout: &ObsLayout,
-    opts: &NetOptions,
-    n: usize,
-    with_value: bool,
-    alloc: &mut ParamAlloc,
-) -> Option<DiscreteArch> {
-    let names = [
-        "profile_keys",
-        "profile_values",
-        "profile_mask",
-        "dom_tokens",
-        "dom_features",
-        "dom_mask",
-    ];
-    let mut idx = [0; 6];
-    for (i, name) in names.iter().enumerate() {
-        idx[i] = layout.index(name)?;
-    }
-    if !web_dtypes_fit(layout, &idx) {
-        return None;
-    }
-    let shape = |i: usize| &layout.tensors[idx[i]].1;
-    let (pk, dt, df) = (shape(0), shape(3), shape(4));
-    if pk.len() != 2 || dt.len() != 3 || df.len() != 2 {
-        return None;
-    }
-    let (fields, tokens) = (pk[0], pk[1]);
-    let (elements, attrs) = (dt[0], dt[1]);
-    if dt[2] != tokens
-        || shape(1) != pk
-        || layout.dim(idx[2]) != fields
-        || layout.dim(idx[5]) != elements
-        || df[0] != elements
-        || n != elements * fields * 2
-    {
-        return None;
-    }
-    let vocab = spec
-        .metadata
-        .get("vocab_size")
-        .and_then(|v| v.parse::<usize>().ok())
-        .unwrap_or(500);
-    let (d, l) = (opts.embedding_dim, opts.latent_dim);
-    let embed = Embedding::new(alloc, vocab, d);
-    let field_mlp = Mlp::new(alloc, &[2 * d, l, l], Activation::Relu);
-    let elem_mlp = Mlp::new(alloc, &[attrs * d + df[1], l, l], Activation::Relu);
-    let type_e = Linear::new(alloc, l, 2);
-    let type_f = Linear::new(alloc, l, 2);
-    let value = with_value.then(|| Mlp::new(alloc, &[2 * l, l, 1], Activation::Relu));
-    Some(DiscreteArch::Web(WebArch {
-        idx,
-        fields,
-        elements,
-        tokens,
-        attrs,
-        dom_feats: df[1],
-        embed,
-        field_mlp,
-        elem_mlp,
-        type_e,
-        type_f,
-        value,
-    }))
-}
-
-/// Whether the web network can read `layout`: token tensors (keys, values, DOM tokens) are
-/// integers, which the embedding looks up as they are, and masks and DOM features are floats.
-pub(crate) fn web_dtypes_fit(layout: &ObsLayout, idx: &[usize; 6]) -> bool {
-    idx.iter()
-        .enumerate()
-        .all(|(k, &i)| layout.is_integer(i) == matches!(k, 0 | 1 | 3))
-}
-
-fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws) {
-    let b = batch.len();
-    let (nf, ne, t, na) = (w.fields, w.elements, w.tokens, w.attrs);
-    let (d, l) = (w.embed.dim, w.field_mlp.out());
-    let pk = batch.ints(w.idx[0]);
-    let pv = batch.ints(w.idx[1]);
-    let pm = batch.tensor(w.idx[2]);
-    let dt = batch.ints(w.idx[3]);
-    let df = batch.tensor(w.idx[4]);
-    let dm = batch.tensor(w.idx[5]);
-    ws.active_f.clear();
-    ws.active_e.clear();
-    for r in 0..b {
-        for f in 0..nf {
-            if pm[r * nf + f] > 0.5 {
-                ws.active_f.push((r, f));
-            }
-        }
-        for e in 0..ne {
-            if dm[r * ne + e] > 0.5 {
-                ws.active_e.push((r, e));
-            }
-        }
-    }
-    let (caf, cae) = (ws.active_f.len(), ws.active_e.len());
-    let [fin, ein, fd, ed, tf, te, s, vin, ..] = &mut ws.v;
-    // Field and element inputs, active rows only.
-    ensure(fin, caf * 2 * d);
-    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
-        let at = (r * nf + f) * t;
-        let o = &mut fin[i * 2 * d..(i + 1) * 2 * d];
-        w.embed.pool(params, &pk[at..at + t], t, &mut o[..d]);
-        w.embed.pool(params, &pv[at..at + t], t, &mut o[d..]);
-    }
-    let ein_w = na * d + w.dom_feats;
-    ensure(ein, cae * ein_w);
-    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
-        let at = (r * ne + e) * na * t;
-        let o = &mut ein[i * ein_w..(i + 1) * ein_w];
-        w.embed
-            .pool(params, &dt[at..at + na * t], t, &mut o[..na * d]);
-        let fa = (r * ne + e) * w.dom_feats;
-        o[na * d..].copy_from_slice(&df[fa..fa + w.dom_feats]);
-    }
-    let fe = w.field_mlp.forward(params, fin, caf, &mut ws.a);
-    let ee = w.elem_mlp.forward(params, ein, cae, &mut ws.b);
-    // Dense [B, F, L] and [B, E, L] with zeros for inactive rows.
-    ensure(fd, b * nf * l);
-    fd[..b * nf * l].fill(0.0);
-    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
-        fd[(r * nf + f) * l..(r * nf + f + 1) * l].copy_from_slice(&fe[i * l..(i + 1) * l]);
-    }
-    ensure(ed, b * ne * l);
-    ed[..b * ne * l].fill(0.0);
-    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
-        ed[(r * ne + e) * l..(r * ne + e + 1) * l].copy_from_slice(&ee[i * l..(i + 1) * l]);
-    }
-    // Action-type terms.
-    ensure(tf, b * nf * 2);
-    tf[..b * nf * 2].fill(0.0);
-    ensure(te, b * ne * 2);
-    te[..b * ne * 2].fill(0.0);
-    ensure(vin, caf.max(cae) * 2);
-    w.type_f.forward(params, fe, caf, vin);
-    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
-        tf[(r * nf + f) * 2..(r * nf + f) * 2 + 2].copy_from_slice(&vin[i * 2..i * 2 + 2]);
-    }
-    w.type_e.forward(params, ee, cae, vin);
-    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
-        te[(r * ne + e) * 2..(r * ne + e) * 2 + 2].copy_from_slice(&vin[i * 2..i * 2 + 2]);
-    }
-    // Scores S[b] = F_b E_bᵀ, [F, E].
-    ensure(s, nf * ne);
-    for r in 0..b {
-        let fm = MatRef::from_row_major_slice(&fd[r * nf * l..(r + 1) * nf * l], nf, l);
-        let em = MatRef::from_row_major_slice(&ed[r * ne * l..(r + 1) * ne * l], ne, l);
-        let sm = MatMut::from_row_major_slice_mut(&mut s[..nf * ne], nf, ne);
-        matmul(sm, Accum::Replace, fm, em.transpose(), 1.0f32, Par::Seq);
-        let logits = &mut ws.logits[r * ne * nf * 2..(r + 1) * ne * nf * 2];
-        for e in 0..ne {
-            let tei = &te[(r * ne + e) * 2..(r * ne + e) * 2 + 2];
-            for f in 0..nf {
-                let tfi = &tf[(r * nf + f) * 2..(r * nf + f) * 2 + 2];
-                let sc = s[f * ne + e];
-                let at = (e * nf + f) * 2;
-                logits[at] = sc + tei[0] + tfi[0];
-                logits[at + 1] = sc + tei[1] + tfi[1];
-            }
-        }
-    }
-    if let Some(v) = &w.value {
-        web_value_input(w, ws, b);
-        let [.., vx, _, _] = &mut ws.v;
-        let y = v.forward(params, vx, b, &mut ws.c);
-        ws.values[..b].copy_from_slice(y);
-    }
-}
-
-/// Mean element and mean field embeddings per row → `ws.v[9]` `[B, 2L]`.
-fn web_value_input(w: &WebArch, ws: &mut Ws, b: usize) {
-    let l = w.field_mlp.out();
-    let (nf, ne) = (w.fields, w.elements);
-    let [_, _, fd, ed, .., vx, cnt, _] = &mut ws.v;
-    ensure(vx, b * 2 * l);
-    ensure(cnt, b * 2);
-    vx[..b * 2 * l].fill(0.0);
-    cnt[..b * 2].fill(0.0);
-    for &(r, e) in &ws.active_e {
-        cnt[r * 2] += 1.0;
-        for (o, x) in vx[r * 2 * l..r * 2 * l + l]
-            .iter_mut()
-            .zip(&ed[(r * ne + e) * l..(r * ne + e + 1) * l])
-        {
-            *o += x;
-        }
-    }
-    for &(r, f) in &ws.active_f {
-        cnt[r * 2 + 1] += 1.0;
-        for (o, x) in vx[r * 2 * l + l..(r + 1) * 2 * l]
-            .iter_mut()
-            .zip(&fd[(r * nf + f) * l..(r * nf + f + 1) * l])
-        {
-            *o += x;
-        }
-    }
-    for r in 0..b {
-        let (ce, cf) = (cnt[r * 2].max(1.0), cnt[r * 2 + 1].max(1.0));
-        vx[r * 2 * l..r * 2 * l + l]
-            .iter_mut()
-            .for_each(|x| *x /= ce);
-        vx[r * 2 * l + l..(r + 1) * 2 * l]
-            .iter_mut()
-            .for_each(|x| *x /= cf);
-    }
-}
-
-fn web_backward(
-    w: &WebArch,
-    params: &[f32],
-    grads: &mut [f32],
-    batch: &ObsBatch,
-    ws: &mut Ws,
-    dlogits: &[f32],
-    dvalues: Option<&[f32]>,
-) {
-    let b = ws.batch;
-    let (nf, ne, t, na) = (w.fields, w.elements, w.tokens, w.attrs);
-    let (d, l) = (w.embed.dim, w.field_mlp.out());
-    let (caf, cae) = (ws.active_f.len(), ws.active_e.len());
-    let ein_w = na * d + w.dom_feats;
-    // Work buffers: reuse x for dS, and MlpWs-independent scratch below.
-    let mut dfd = std::mem::take(&mut ws.x);
-    let [fin, ein, fd, ed, dtf, dte, ds, dfe, dee, vx, cnt, dtmp] = &mut ws.v;
-    ensure(ds, nf * ne);
-    ensure(&mut dfd, b * (nf + ne) * l);
-    ensure(dtf, b * nf * 2);
-    ensure(dte, b * ne * 2);
-    dtf[..b * nf * 2].fill(0.0);
-    dte[..b * ne * 2].fill(0.0);
-    let (dfd_f, dfd_e) = dfd[..b * (nf + ne) * l].split_at_mut(b * nf * l);
-    for r in 0..b {
-        let dl = &dlogits[r * ne * nf * 2..(r + 1) * ne * nf * 2];
-        for e in 0..ne {
-            for f in 0..nf {
-                let at = (e * nf + f) * 2;
-                let (g0, g1) = (dl[at], dl[at + 1]);
-                ds[f * ne + e] = g0 + g1;
-                dte[(r * ne + e) * 2] += g0;
-                dte[(r * ne + e) * 2 + 1] += g1;
-                dtf[(r * nf + f) * 2] += g0;
-                dtf[(r * nf + f) * 2 + 1] += g1;
-            }
-        }
-        let dsm = MatRef::from_row_major_slice(&ds[..nf * ne], nf, ne);
-        let fm = MatRef::from_row_major_slice(&fd[r * nf * l..(r + 1) * nf * l], nf, l);
-        let em = MatRef::from_row_major_slice(&ed[r * ne * l..(r + 1) * ne * l], ne, l);
-        let dfm = MatMut::from_row_major_slice_mut(&mut dfd_f[r * nf * l..(r + 1) * nf * l], nf, l);
-        matmul(dfm, Accum::Replace, dsm, em, 1.0f32, Par::Seq);
-        let dem = MatMut::from_row_major_slice_mut(&mut dfd_e[r * ne * l..(r + 1) * ne * l], ne, l);
-        matmul(dem, Accum::Replace, dsm.transpose(), fm, 1.0f32, Par::Seq);
-    }
-    // Value head contributions to the dense gradients.
-    if let (Some(v), Some(dv)) = (&w.value, dvalues) {
-        ensure(dtmp, b * 2 * l);
-        v.backward(params, grads, vx, &dv[..b], &mut ws.c, Some(dtmp));
-        for &(r, e) in &ws.active_e {
-            let c = cnt[r * 2].max(1.0);
-            for (o, x) in dfd_e[(r * ne + e) * l..(r * ne + e + 1) * l]
-                .iter_mut()
-                .zip(&dtmp[r * 2 * l..r * 2 * l + l])
-            {
-                *o += x / c;
-            }
-        }
-        for &(r, f) in &ws.active_f {
-            let c = cnt[r * 2 + 1].max(1.0);
-            for (o, x) in dfd_f[(r * nf + f) * l..(r * nf + f + 1) * l]
-                .iter_mut()
-                .zip(&dtmp[r * 2 * l + l..(r + 1) * 2 * l])
-            {
-                *o += x / c;
-            }
-        }
-    }
-    // Gather to active rows, add type-head gradients.
-    ensure(dfe, caf * l);
-    ensure(dee, cae.max(caf) * 2);
-    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
-        dfe[i * l..(i + 1) * l].copy_from_slice(&dfd_f[(r * nf + f) * l..(r * nf + f + 1) * l]);
-        dee[i * 2..i * 2 + 2].copy_from_slice(&dtf[(r * nf + f) * 2..(r * nf + f) * 2 + 2]);
-    }
-    ensure(dtmp, caf.max(cae) * l.max(2 * l));
-    let fe = w.field_mlp.output(&ws.a);
-    w.type_f.backward(params, grads, fe, dee, caf, Some(dtmp));
-    for (a, x) in dfe[..caf * l].iter_mut().zip(&dtmp[..caf * l]) {
-        *a += x;
-    }
-    // Field MLP and embeddings.
-    ensure(fd, caf * 2 * d);
-    w.field_mlp.backward(
-        params,
-        grads,
-        fin,
-        dfe,
-        &mut ws.a,
-        Some(&mut fd[..caf * 2 * d]),
-    );
-    let pk = batch.ints(w.idx[0]);
-    let pv = batch.ints(w.idx[1]);
-    for (i, &(r, f)) in ws.active_f.iter().enumerate() {
-        let at = (r * nf + f) * t;
-        let g = &fd[i * 2 * d..(i + 1) * 2 * d];
-        w.embed.pool_backward(grads, &pk[at..at + t], t, &g[..d]);
-        w.embed.pool_backward(grads, &pv[at..at + t], t, &g[d..]);
-    }
-    // Elements: reuse dfe as the [cae, L] gradient buffer.
-    ensure(dfe, cae * l);
-    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
-        dfe[i * l..(i + 1) * l].copy_from_slice(&dfd_e[(r * ne + e) * l..(r * ne + e + 1) * l]);
-        dee[i * 2..i * 2 + 2].copy_from_slice(&dte[(r * ne + e) * 2..(r * ne + e) * 2 + 2]);
-    }
-    let ee = w.elem_mlp.output(&ws.b);
-    w.type_e.backward(params, grads, ee, dee, cae, Some(dtmp));
-    for (a, x) in dfe[..cae * l].iter_mut().zip(&dtmp[..cae * l]) {
-        *a += x;
-    }
-    ensure(ed, cae * ein_w);
-    w.elem_mlp.backward(
-        params,
-        grads,
-        ein,
-        dfe,
-        &mut ws.b,
-        Some(&mut ed[..cae * ein_w]),
-    );
-    let dt = batch.ints(w.idx[3]);
-    for (i, &(r, e)) in ws.active_e.iter().enumerate() {
-        let at = (r * ne + e) * na * t;
-        w.embed.pool_backward(
-            grads,
-            &dt[at..at + na * t],
-            t,
-            &ed[i * ein_w..i * ein_w + na * d],
-        );
-    }
-    ws.x = dfd;
 }
 
 /// Continuous-action network: Gaussian policy with a state-independent log-std (PPO, BC), plus an

@@ -3,7 +3,7 @@
 mod common;
 
 use a2perf_baselines::batch::{ObsBatch, ObsLayout};
-use a2perf_baselines::model::{DiscreteNet, NetOptions};
+use a2perf_baselines::model::{DiscreteNet, NetOptions, WebPath};
 use a2perf_baselines::nn::dist::{gaussian, masked, tanh_gaussian};
 use a2perf_baselines::nn::embed::Embedding;
 use a2perf_baselines::nn::{Activation, Linear, Mlp, MlpWs, ParamAlloc};
@@ -281,13 +281,14 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(12))]
 
     #[test]
-    fn web_network_gradients(seed in 0u64..1000, rows in 1usize..3) {
+    fn web_network_gradients(seed in 0u64..1000, rows in 1usize..3, projected in any::<bool>()) {
         let env = common::MiniWeb::new(3, 4, 3);
         let spec = env.spec_ref().clone();
         let layout = ObsLayout::from_spec(&spec).unwrap();
         let opts = NetOptions { embedding_dim: 4, latent_dim: 3, ..NetOptions::default() };
         let mut net = DiscreteNet::for_spec(&spec, &layout, &opts, true).unwrap();
         prop_assert_eq!(net.kind(), "web");
+        net.set_web_path(if projected { WebPath::Projected } else { WebPath::Direct });
         let mut rng = RngStream::new(seed, "obs");
         let mut batch = ObsBatch::new(&layout);
         for _ in 0..rows { batch.push(&env.observation(&mut rng)).unwrap(); }
@@ -318,5 +319,87 @@ proptest! {
         let mut batch = ObsBatch::new(&layout);
         for _ in 0..rows { batch.push(&common::mini_circuit_obs(&mut rng)).unwrap(); }
         check_net(&mut net, &batch, seed)?;
+    }
+}
+
+/// A web batch of `rows` random pages, with some token groups emptied (all padding) and some
+/// ids past the vocabulary (the out-of-vocabulary row), which both paths must treat alike.
+fn web_batch(
+    env: &common::MiniWeb,
+    layout: &ObsLayout,
+    rows: usize,
+    rng: &mut RngStream,
+) -> ObsBatch {
+    let mut batch = ObsBatch::new(layout);
+    for _ in 0..rows {
+        batch.push(&env.observation(rng)).unwrap();
+    }
+    for name in ["profile_keys", "profile_values", "dom_tokens"] {
+        let i = layout.index(name).unwrap();
+        for r in 0..rows {
+            let toks = batch.int_row_mut(i, r);
+            for group in toks.chunks_exact_mut(env.t) {
+                match rng.index(6) {
+                    0 => group.fill(0),
+                    1 => group[0] = 40,
+                    _ => {}
+                }
+            }
+        }
+    }
+    batch
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// The projected first layers (gather rows of `E W_sᵀ`) compute what the direct ones (pool,
+    /// then multiply) do, forward and backward, up to float rounding.
+    #[test]
+    fn web_paths_agree(seed in 0u64..1000, rows in 1usize..7) {
+        let env = common::MiniWeb::new(4, 6, 3);
+        let spec = env.spec_ref().clone();
+        let layout = ObsLayout::from_spec(&spec).unwrap();
+        let opts = NetOptions { embedding_dim: 5, latent_dim: 4, ..NetOptions::default() };
+        let mut direct = DiscreteNet::for_spec(&spec, &layout, &opts, true).unwrap();
+        let mut projected = direct.clone();
+        direct.set_web_path(WebPath::Direct);
+        projected.set_web_path(WebPath::Projected);
+        let mut rng = RngStream::new(seed, "paths");
+        let mut p = direct.init_params(&mut rng);
+        for v in p.iter_mut() {
+            *v += (rng.normal() * 0.3) as f32;
+        }
+        let batch = web_batch(&env, &layout, rows, &mut rng);
+        direct.forward(&p, &batch);
+        projected.forward(&p, &batch);
+        let close = |a: &[f32], b: &[f32], what: &str| -> Result<(), TestCaseError> {
+            prop_assert_eq!(a.len(), b.len());
+            for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                prop_assert!((x - y).abs() <= 1e-4 * x.abs().max(y.abs()) + 1e-5,
+                    "{} {}: direct {} projected {}", what, i, x, y);
+            }
+            Ok(())
+        };
+        close(direct.logits(), projected.logits(), "logit")?;
+        close(direct.values(), projected.values(), "value")?;
+        let c = rand_vec(&mut rng, direct.logits().len(), 1.0);
+        let cv = rand_vec(&mut rng, direct.values().len(), 1.0);
+        let (mut gd, mut gp) = (vec![0.0; p.len()], vec![0.0; p.len()]);
+        direct.backward(&p, &mut gd, &batch, &c, Some(&cv));
+        projected.backward(&p, &mut gp, &batch, &c, Some(&cv));
+        close(&gd, &gp, "gradient")?;
+        // The gradients are not trivially equal: some are non-zero.
+        prop_assert!(gd.iter().any(|g| g.abs() > 1e-3));
+        // New parameters after a forward with the old ones: the projected tables the
+        // network keeps for unchanged parameters must be rebuilt when any one weight changes.
+        for _ in 0..6 {
+            let i = rng.index(p.len());
+            p[i] += 0.5;
+            direct.forward(&p, &batch);
+            projected.forward(&p, &batch);
+            close(direct.logits(), projected.logits(), "logit after a parameter change")?;
+            close(direct.values(), projected.values(), "value after a parameter change")?;
+        }
     }
 }

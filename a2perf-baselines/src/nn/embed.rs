@@ -34,7 +34,8 @@ impl Embedding {
         }
     }
 
-    fn row(&self, token: i32) -> Option<usize> {
+    /// The table row of `token`, or `None` for padding.
+    pub(crate) fn row(&self, token: i32) -> Option<usize> {
         // Padding (0) and negative ids do not contribute.
         let id = usize::try_from(token).ok().filter(|&id| id > 0)?;
         Some(id.min(self.vocab - 1))

@@ -70,11 +70,11 @@ impl Linear {
         Self { inp, out, offset }
     }
 
-    fn w_range(&self) -> std::ops::Range<usize> {
+    pub(crate) fn w_range(&self) -> std::ops::Range<usize> {
         self.offset..self.offset + self.inp * self.out
     }
 
-    fn b_range(&self) -> std::ops::Range<usize> {
+    pub(crate) fn b_range(&self) -> std::ops::Range<usize> {
         let s = self.offset + self.inp * self.out;
         s..s + self.out
     }
@@ -267,18 +267,51 @@ impl Mlp {
         batch: usize,
         ws: &'w mut MlpWs,
     ) -> &'w [f32] {
+        self.forward_with_first(params, batch, ws, |first, out| {
+            first.forward(params, x, batch, out)
+        })
+    }
+
+    /// Forward pass whose first layer is computed by `first(layer, out)`, which writes the
+    /// layer's pre-activation `[batch, layers[0].out]` into `out`; the nonlinearity and the other
+    /// layers run as in [`forward`](Self::forward). For callers that compute the first layer
+    /// more cheaply than from an explicit input (the web network's projected embeddings).
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::{Activation, Mlp, MlpWs, ParamAlloc};
+    /// use a2perf_core::RngStream;
+    /// let mut alloc = ParamAlloc::new();
+    /// let mlp = Mlp::new(&mut alloc, &[3, 8, 2], Activation::Relu);
+    /// let mut params = vec![0.0; alloc.len()];
+    /// mlp.init(&mut params, &mut RngStream::new(0, "init"), 1.0);
+    /// let x = [0.1, 0.2, 0.3];
+    /// let y = mlp.forward(&params, &x, 1, &mut MlpWs::default()).to_vec();
+    /// let mut ws = MlpWs::default();
+    /// let z = mlp.forward_with_first(&params, 1, &mut ws, |l, out| l.forward(&params, &x, 1, out));
+    /// assert_eq!(y, z);
+    /// ```
+    pub fn forward_with_first<'w>(
+        &self,
+        params: &[f32],
+        batch: usize,
+        ws: &'w mut MlpWs,
+        first: impl FnOnce(&Linear, &mut [f32]),
+    ) -> &'w [f32] {
         if ws.outs.len() != self.layers.len() {
             ws.outs = vec![Vec::new(); self.layers.len()];
         }
         ws.batch = batch;
         let n = self.layers.len();
+        let mut first = Some(first);
         for i in 0..n {
             let layer = &self.layers[i];
             let (before, rest) = ws.outs.split_at_mut(i);
             let out = &mut rest[0];
             ensure(out, batch * layer.out);
-            let input: &[f32] = if i == 0 { x } else { &before[i - 1] };
-            layer.forward(params, input, batch, out);
+            match first.take() {
+                Some(f) => f(layer, &mut out[..batch * layer.out]),
+                None => layer.forward(params, &before[i - 1], batch, out),
+            }
             if i + 1 < n || self.activate_last {
                 self.activation.apply(&mut out[..batch * layer.out]);
             }
@@ -305,6 +338,25 @@ impl Mlp {
         dx: Option<&mut [f32]>,
     ) {
         let batch = ws.batch;
+        let Some(first) = self.layers.first() else {
+            return;
+        };
+        let d = self.backward_to_first(params, grads, dout, ws);
+        first.backward(params, grads, x, d, batch, dx);
+    }
+
+    /// Backward pass through every layer but the first: accumulates those layers' parameter
+    /// gradients and returns the gradient of the first layer's pre-activation
+    /// `[batch, layers[0].out]`, for a caller that computed the first layer itself
+    /// ([`forward_with_first`](Self::forward_with_first)).
+    pub fn backward_to_first<'w>(
+        &self,
+        params: &[f32],
+        grads: &mut [f32],
+        dout: &[f32],
+        ws: &'w mut MlpWs,
+    ) -> &'w [f32] {
+        let batch = ws.batch;
         let n = self.layers.len();
         let MlpWs { outs, d_a, d_b, .. } = ws;
         ensure(d_a, batch * self.out());
@@ -315,22 +367,18 @@ impl Mlp {
             self.activation
                 .backward(&last[..batch * self.out()], &mut d_a[..batch * self.out()]);
         }
-        let mut dx = dx;
-        for i in (0..n).rev() {
+        for i in (1..n).rev() {
             let layer = &self.layers[i];
-            let input: &[f32] = if i == 0 { x } else { &outs[i - 1] };
-            if i == 0 {
-                layer.backward(params, grads, input, d_a, batch, dx.as_deref_mut());
-            } else {
-                ensure(d_b, batch * layer.inp);
-                layer.backward(params, grads, input, d_a, batch, Some(d_b));
-                self.activation.backward(
-                    &outs[i - 1][..batch * layer.inp],
-                    &mut d_b[..batch * layer.inp],
-                );
-                std::mem::swap(d_a, d_b);
-            }
+            ensure(d_b, batch * layer.inp);
+            layer.backward(params, grads, &outs[i - 1], d_a, batch, Some(d_b));
+            self.activation.backward(
+                &outs[i - 1][..batch * layer.inp],
+                &mut d_b[..batch * layer.inp],
+            );
+            std::mem::swap(d_a, d_b);
         }
+        let inp = self.layers.first().map_or(0, |l| l.out);
+        &d_a[..batch * inp]
     }
 }
 
