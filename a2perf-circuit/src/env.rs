@@ -72,8 +72,9 @@
 //! drawn, so for a finished placement the two are identical).
 
 use std::collections::BTreeMap;
+use std::hash::{DefaultHasher, Hash, Hasher};
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
 
 use a2perf_core::{
     Action, DType, Env, EnvEntry, EnvError, EnvSpec, Frame, Observation, ParamKind, ParamSpec,
@@ -312,7 +313,12 @@ pub struct CircuitEnv {
     block_counts: [u32; FEATURE_MAP * FEATURE_MAP],
     /// The cells chosen this episode, in order (the key of `ends`).
     cells: Vec<u32>,
-    ends: EndCache,
+    /// The cache of episode ends: shared with every environment of the process with the same
+    /// [`start_fingerprint`] (`ends_shared`), or private; `None` = off.
+    ends: Option<Arc<Mutex<EndCache>>>,
+    ends_shared: bool,
+    /// Episode ends restored from `ends` by this environment.
+    end_hits: u64,
 }
 
 /// Episode ends already placed. Every episode starts from the same state and places the macros
@@ -323,9 +329,9 @@ pub struct CircuitEnv {
 /// placers end with, so rewards, infos and the state are bit-identical. This pays wherever
 /// placements repeat: the toy's two macros have 9,144 legal placements, and a greedy policy
 /// evaluated on a deterministic environment places the same way in every episode.
-#[derive(Clone, Debug, Default)]
+#[derive(Debug, Default)]
 struct EndCache {
-    map: std::collections::HashMap<Vec<u32>, EndState>,
+    map: std::collections::HashMap<Vec<u32>, Arc<EndState>>,
     /// Approximate bytes held; the cache is emptied when it would exceed `limit`.
     bytes: usize,
     limit: usize,
@@ -333,14 +339,125 @@ struct EndCache {
 
 /// What the placer changed: the moved nodes' positions and the placed flags of the macros in
 /// placement order.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 struct EndState {
     moved: Vec<(u32, f64, f64)>,
     placed: Vec<bool>,
 }
 
-/// Default byte budget of each environment's [`EndCache`] (about 2,000 Ariane episode ends).
+/// Default byte budget of a private [`EndCache`] (about 1,700 Ariane episode ends).
 const END_CACHE_BYTES: usize = 32 << 20;
+
+/// Byte budget of the [`EndCache`] shared by the environments of one start state and placer
+/// (about 6,700 Ariane episode ends; the toy's are a few hundred bytes each). It counts in the
+/// process's memory, so it stays below what five private caches could hold.
+const SHARED_END_CACHE_BYTES: usize = 128 << 20;
+
+/// The shared caches of episode ends, by [`start_fingerprint`]. Weak, so that a cache is freed
+/// with the last environment using it.
+static SHARED_ENDS: Mutex<BTreeMap<[u64; 2], Weak<Mutex<EndCache>>>> = Mutex::new(BTreeMap::new());
+
+/// Locks `m`, also after a panic elsewhere: every cache operation leaves a valid cache (at
+/// worst its byte count is off), and a hit equals a miss bit for bit.
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The cache shared by the environments whose start state and end placer have fingerprint
+/// `fingerprint`: the vector environments of a run, its evaluation environment and other runs
+/// of the same task in the process.
+fn shared_end_cache(fingerprint: [u64; 2]) -> Arc<Mutex<EndCache>> {
+    let mut registry = lock(&SHARED_ENDS);
+    registry.retain(|_, cache| cache.strong_count() > 0);
+    if let Some(cache) = registry.get(&fingerprint).and_then(Weak::upgrade) {
+        return cache;
+    }
+    let cache = Arc::new(Mutex::new(EndCache::new(SHARED_END_CACHE_BYTES)));
+    registry.insert(fingerprint, Arc::downgrade(&cache));
+    cache
+}
+
+/// Feeds every write to two hashers started differently: a 128-bit fingerprint from std's
+/// 64-bit SipHash (two environments that share a cache by a collision would give wrong ends).
+struct Hasher128(DefaultHasher, DefaultHasher);
+
+impl Hasher128 {
+    fn new() -> Self {
+        let (mut a, mut b) = (DefaultHasher::new(), DefaultHasher::new());
+        a.write_u8(1);
+        b.write_u8(2);
+        Self(a, b)
+    }
+
+    fn f64s(&mut self, values: &[f64]) {
+        self.write_usize(values.len());
+        for v in values {
+            self.write_u64(v.to_bits());
+        }
+    }
+}
+
+impl Hasher for Hasher128 {
+    fn write(&mut self, bytes: &[u8]) {
+        self.0.write(bytes);
+        self.1.write(bytes);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0.finish()
+    }
+}
+
+/// What an episode's end is a function of, besides the cells chosen: the whole start state of
+/// `cost` (the netlist as the cost model holds it, the initial placement after the
+/// construction-time placement, orientations, placed and fixed flags, blockages, settings and
+/// weights) and every option of `config` (the placer, its schedule or parameters, and the rest,
+/// which costs at most a few hits). Computed once, when the environment is built.
+fn start_fingerprint(
+    netlist: &Netlist,
+    cost: &PlacementCost,
+    config: &CircuitEnvConfig,
+) -> [u64; 2] {
+    let mut h = Hasher128::new();
+    netlist.content_hash.hash(&mut h);
+    // Debug prints every field, floats exactly (shortest round-trip form), and keeps covering
+    // the fields added later.
+    format!("{config:?}").hash(&mut h);
+    format!("{:?} {:?} {:?}", cost.settings, cost.pgrid, cost.cgrid).hash(&mut h);
+    for v in [
+        &cost.x,
+        &cost.y,
+        &cost.w,
+        &cost.h,
+        &cost.net_w,
+        &cost.net_cw,
+        &cost.pin_ox,
+        &cost.pin_oy,
+    ] {
+        h.f64s(v);
+    }
+    cost.kind.hash(&mut h);
+    cost.orient.hash(&mut h);
+    cost.placed.hash(&mut h);
+    cost.fixed.hash(&mut h);
+    cost.pin_rot.hash(&mut h);
+    for v in [
+        &cost.net_start,
+        &cost.pin_owner,
+        &cost.node_pin_start,
+        &cost.node_pins,
+        &cost.node_net_start,
+        &cost.node_nets,
+        &cost.area_nodes,
+        &cost.hard_macros,
+    ] {
+        v.hash(&mut h);
+    }
+    h.f64s(&cost.macro_blockages.concat());
+    let blockages: Vec<f64> = cost.blockages.iter().flat_map(|b| b.rect).collect();
+    h.f64s(&blockages);
+    [h.0.finish(), h.1.finish()]
+}
 
 impl EndCache {
     fn new(limit: usize) -> Self {
@@ -352,7 +469,9 @@ impl EndCache {
 
     fn insert(&mut self, key: Vec<u32>, state: EndState) {
         let size = key.len() * 4 + state.moved.len() * 24 + state.placed.len() + 64;
-        if size > self.limit {
+        if size > self.limit || self.map.contains_key(&key) {
+            // Too big, or placed meanwhile by another environment sharing the cache (the same
+            // state: the placers are deterministic).
             return;
         }
         if self.bytes + size > self.limit {
@@ -361,12 +480,7 @@ impl EndCache {
             self.bytes = 0;
         }
         self.bytes += size;
-        self.map.insert(key, state);
-    }
-
-    fn clear(&mut self) {
-        self.map.clear();
-        self.bytes = 0;
+        self.map.insert(key, Arc::new(state));
     }
 }
 
@@ -647,6 +761,7 @@ impl CircuitEnv {
         }
         let base_x = (0..n).map(|i| cost.position(i).0).collect();
         let base_y = (0..n).map(|i| cost.position(i).1).collect();
+        let ends = shared_end_cache(start_fingerprint(netlist, &cost, &config));
         Ok(Self {
             spec,
             config,
@@ -669,7 +784,9 @@ impl CircuitEnv {
             cell_block,
             block_counts,
             cells: Vec::new(),
-            ends: EndCache::new(END_CACHE_BYTES),
+            ends: Some(ends),
+            ends_shared: true,
+            end_hits: 0,
         })
     }
 
@@ -678,23 +795,33 @@ impl CircuitEnv {
         &self.cost
     }
 
-    /// Mutable cost model (e.g. to query congestion maps). Empties the cache of episode ends,
-    /// since the caller may change what they depend on.
+    /// Mutable cost model (e.g. to query congestion maps). Detaches this environment from the
+    /// cache of episode ends it shares with others (it gets an empty private one), since the
+    /// caller may change what the ends depend on; the other environments keep theirs.
     pub fn cost_mut(&mut self) -> &mut PlacementCost {
-        self.ends.clear();
+        if let Some(ends) = &self.ends {
+            let limit = if self.ends_shared {
+                END_CACHE_BYTES
+            } else {
+                lock(ends).limit
+            };
+            self.set_end_cache_bytes(limit);
+        }
         &mut self.cost
     }
 
-    /// Sets the byte budget of the cache of placed episode ends (0 turns it off). Results do
-    /// not depend on it, only the time the end of a repeated episode takes.
+    /// Gives this environment a private cache of placed episode ends of `bytes` (0 turns its
+    /// cache off), instead of the one it shares with the environments of the same start state
+    /// and placer. Results do not depend on it, only the time the end of a repeated episode
+    /// takes.
     ///
     /// ```
     /// use a2perf_circuit::{generate, CircuitEnv, CircuitEnvConfig, GeneratorConfig};
     /// use a2perf_core::{Action, Env};
     /// let g = generate(&GeneratorConfig::small(), 0);
-    /// let mut env = CircuitEnv::new(&g.netlist, Some(&g.placement), g.settings.clone(),
-    ///                               CircuitEnvConfig::default()).unwrap();
-    /// let mut episode = |env: &mut CircuitEnv| {
+    /// let new_env = || CircuitEnv::new(&g.netlist, Some(&g.placement), g.settings.clone(),
+    ///                                  CircuitEnvConfig::default()).unwrap();
+    /// let episode = |env: &mut CircuitEnv| {
     ///     let mut obs = env.reset(Some(0)).unwrap();
     ///     loop {
     ///         let a = obs.action_mask.clone().unwrap().iter().position(|m| *m).unwrap();
@@ -703,26 +830,40 @@ impl CircuitEnv {
     ///         obs = step.observation.clone();
     ///     }
     /// };
+    /// let (mut env, mut other) = (new_env(), new_env());
     /// let first = episode(&mut env);
-    /// assert_eq!(env.end_cache_len(), 1);
-    /// assert_eq!(episode(&mut env).to_bits(), first.to_bits()); // restored, not placed again
+    /// assert!(env.end_cache_len() >= 1);
+    /// // The same start state and placer: `other` restores the end `env` placed.
+    /// assert_eq!(episode(&mut other).to_bits(), first.to_bits());
+    /// assert_eq!(other.end_cache_hits(), 1);
     /// env.set_end_cache_bytes(0);
-    /// assert_eq!(episode(&mut env).to_bits(), first.to_bits());
-    /// assert_eq!(env.end_cache_len(), 0);
+    /// assert_eq!(episode(&mut env).to_bits(), first.to_bits()); // placed again
+    /// assert_eq!((env.end_cache_len(), env.end_cache_hits()), (0, 0));
     /// ```
     pub fn set_end_cache_bytes(&mut self, bytes: usize) {
-        self.ends = EndCache::new(bytes);
+        self.ends = (bytes > 0).then(|| Arc::new(Mutex::new(EndCache::new(bytes))));
+        self.ends_shared = false;
     }
 
-    /// Number of episode ends in the cache.
+    /// Number of episode ends in this environment's cache (shared or private).
     pub fn end_cache_len(&self) -> usize {
-        self.ends.map.len()
+        self.ends.as_ref().map_or(0, |ends| lock(ends).map.len())
+    }
+
+    /// Episode ends this environment restored from its cache instead of placing them.
+    pub fn end_cache_hits(&self) -> u64 {
+        self.end_hits
     }
 
     /// Runs the end-of-episode placer (`macros` as the placer takes them), or restores its
-    /// result when these cells were placed before.
+    /// result when these cells were placed before (by this environment or one sharing its
+    /// cache). The lock is held for the lookup and the insertion only, never while placing.
     fn place_end(&mut self, macros: MovableMacros) -> Result<(), EnvError> {
-        if let Some(state) = self.ends.map.get(&self.cells) {
+        let hit = self
+            .ends
+            .as_ref()
+            .and_then(|ends| lock(ends).map.get(&self.cells).cloned());
+        if let Some(state) = hit {
             for &(i, x, y) in &state.moved {
                 self.cost.x[i as usize] = x;
                 self.cost.y[i as usize] = y;
@@ -731,6 +872,7 @@ impl CircuitEnv {
                 self.cost.placed[i] = p;
             }
             self.cost.recompute();
+            self.end_hits += 1;
             return Ok(());
         }
         match self.config.std_cell_placer {
@@ -740,7 +882,7 @@ impl CircuitEnv {
             StdCellPlacer::DreamPlace => self.place_analytically(macros)?,
             StdCellPlacer::None => return Ok(()),
         }
-        if self.ends.limit > 0 {
+        if let Some(ends) = &self.ends {
             let moved = (0..self.base_x.len())
                 .filter(|&i| {
                     self.cost.x[i].to_bits() != self.base_x[i].to_bits()
@@ -749,8 +891,7 @@ impl CircuitEnv {
                 .map(|i| (i as u32, self.cost.x[i], self.cost.y[i]))
                 .collect();
             let placed = self.order.iter().map(|&i| self.cost.placed[i]).collect();
-            self.ends
-                .insert(self.cells.clone(), EndState { moved, placed });
+            lock(ends).insert(self.cells.clone(), EndState { moved, placed });
         }
         Ok(())
     }

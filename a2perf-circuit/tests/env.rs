@@ -7,8 +7,14 @@ use std::collections::BTreeMap;
 use a2perf_circuit::env::{
     A2PERF_INFEASIBLE_REWARD, FEATURE_DIM, GRID_CHANNELS, INFEASIBLE_REWARD,
 };
+use a2perf_circuit::{
+    CircuitEnvConfig, CostSettings, GeneratedCircuit, InitialLocations, NodeKind, StdCellPlacer,
+};
 use a2perf_core::{Action, DType, Env, RngStream, Space, Value};
-use common::{coarse_small, random_episode_actions, registry, replay, shared_circuit_dir};
+use common::{
+    coarse_small, coarse_small_env, episode_end, random_episode_actions, registry, replay,
+    shared_circuit_dir,
+};
 
 fn random_episode(env: &mut dyn Env, seed: u64) -> (f64, usize, Vec<(String, f64)>) {
     let mut rng = RngStream::new(seed, "test/actions");
@@ -296,13 +302,16 @@ fn infeasible_reward_is_below_feasible_placements_with_an_a2perf_switch() {
 }
 
 /// A repeated episode's end is restored from the environment's cache of placed ends: its
-/// reward and info must be bit-identical to placing it afresh (a new environment per episode),
-/// for both placers, feasible and infeasible ends alike.
+/// reward, info and observation must be bit-identical to placing it afresh (an environment with
+/// the cache off), for both placers, feasible and infeasible ends alike.
 #[test]
 fn repeated_episode_ends_equal_fresh_placements() {
     let reg = registry();
-    for placer in ["fd", "dreamplace"] {
-        let extra = [("std_cell_placer", Value::Str(placer.into()))];
+    for (name, placer) in [
+        ("fd", StdCellPlacer::Fd),
+        ("dreamplace", StdCellPlacer::DreamPlace),
+    ] {
+        let extra = [("std_cell_placer", Value::Str(name.into()))];
         let mut env = coarse_small(&reg, &extra);
         // Eight random episodes, then the same eight again in reverse order.
         let mut episodes: Vec<Vec<usize>> = (0..8u64)
@@ -310,35 +319,176 @@ fn repeated_episode_ends_equal_fresh_placements() {
             .collect();
         let again: Vec<Vec<usize>> = episodes.iter().rev().cloned().collect();
         episodes.extend(again);
-        let end = |env: &mut dyn Env, actions: &[usize]| {
-            env.reset(Some(0)).unwrap();
-            for &a in actions {
-                let step = env.step(&Action::Discrete(a)).unwrap();
-                if step.done() {
-                    let mut info: Vec<(String, u64)> = step
-                        .info
-                        .iter()
-                        .map(|(k, v)| (k.to_string(), v.to_bits()))
-                        .collect();
-                    info.sort();
-                    return (step.reward.to_bits(), info);
-                }
-            }
-            panic!("the episode did not end");
-        };
+        let mut fresh_env = coarse_small_env(0, |_, _, c| c.std_cell_placer = placer);
+        fresh_env.set_end_cache_bytes(0);
         let mut infeasible_ends = 0;
         for actions in &episodes {
-            let cached = end(env.as_mut(), actions);
-            let mut fresh_env = coarse_small(&reg, &extra);
-            let fresh = end(fresh_env.as_mut(), actions);
-            assert_eq!(cached, fresh, "{placer}: episode {actions:?}");
+            let cached = episode_end(env.as_mut(), actions);
+            let fresh = episode_end(&mut fresh_env, actions);
+            assert_eq!(cached, fresh, "{name}: episode {actions:?}");
             infeasible_ends +=
                 usize::from(cached.1.contains(&("infeasible".into(), 1f64.to_bits())));
         }
+        assert_eq!(fresh_env.end_cache_hits(), 0);
         // Random placements on the coarse grid strand a macro now and then.
         println!(
-            "{placer}: {infeasible_ends} of {} ends infeasible",
+            "{name}: {infeasible_ends} of {} ends infeasible",
             episodes.len()
         );
     }
+}
+
+/// Random legal episodes of `env` (seeds `0..n`).
+fn random_episodes(env: &mut dyn Env, n: u64) -> Vec<Vec<usize>> {
+    (0..n)
+        .map(|seed| random_episode_actions(env, seed, "test/shared-ends").0)
+        .collect()
+}
+
+/// Environments built separately from the same circuit and options share their episode ends:
+/// the second one restores what the first placed, bit-identical to placing it afresh.
+#[test]
+fn environments_of_one_start_state_share_episode_ends() {
+    for placer in [StdCellPlacer::Fd, StdCellPlacer::DreamPlace] {
+        let make = || coarse_small_env(37, |_, _, c| c.std_cell_placer = placer);
+        let (mut a, mut b, mut fresh) = (make(), make(), make());
+        fresh.set_end_cache_bytes(0);
+        let episodes = random_episodes(&mut a, 4);
+        for (k, actions) in episodes.iter().enumerate() {
+            let from_b = episode_end(&mut b, actions);
+            assert_eq!(b.end_cache_hits(), k as u64 + 1, "{placer:?}: {actions:?}");
+            assert_eq!(from_b, episode_end(&mut a, actions), "{placer:?}");
+            assert_eq!(from_b, episode_end(&mut fresh, actions), "{placer:?}");
+        }
+        assert_eq!(a.end_cache_len(), b.end_cache_len());
+        assert!(a.end_cache_len() >= episodes.len().min(2));
+        assert_eq!((fresh.end_cache_len(), fresh.end_cache_hits()), (0, 0));
+    }
+}
+
+/// Environments that differ in anything their episode ends depend on do not share them, and
+/// each gives what a fresh environment with the cache off gives. Each variant changes one input
+/// of a base environment that is alive beside it (with `initial_locations = plc` the start
+/// states are equal unless the change is to them, so the options alone must keep them apart).
+#[test]
+fn environments_of_different_start_states_or_placers_do_not_share() {
+    type Edit = fn(&mut GeneratedCircuit, &mut CostSettings, &mut CircuitEnvConfig);
+    let dreamplace: Edit = |_, _, c| c.std_cell_placer = StdCellPlacer::DreamPlace;
+    let dreamplace_plc: Edit = |_, _, c| {
+        c.std_cell_placer = StdCellPlacer::DreamPlace;
+        c.initial_locations = InitialLocations::Plc;
+    };
+    let fd_plc: Edit = |_, _, c| {
+        c.std_cell_placer = StdCellPlacer::Fd;
+        c.initial_locations = InitialLocations::Plc;
+    };
+    let cases: [(&str, Edit, Edit); 11] = [
+        ("placer", dreamplace_plc, |_, _, c| {
+            c.std_cell_placer = StdCellPlacer::Fd;
+        }),
+        ("initial locations", dreamplace, |_, _, c| {
+            c.initial_locations = InitialLocations::Plc;
+        }),
+        ("init placement", dreamplace_plc, |g, _, _| {
+            // A soft macro of the .plc elsewhere.
+            let soft = g
+                .placement
+                .entries
+                .iter_mut()
+                .rev()
+                .find(|e| g.netlist.nodes[e.index].kind == NodeKind::SoftMacro)
+                .expect("a soft macro in the placement");
+            soft.x += 1.0;
+        }),
+        (
+            "init placement, placed at construction",
+            dreamplace,
+            |g, _, _| {
+                let soft = g
+                    .placement
+                    .entries
+                    .iter_mut()
+                    .find(|e| g.netlist.nodes[e.index].kind == NodeKind::SoftMacro)
+                    .expect("a soft macro in the placement");
+                soft.y += 1.0;
+            },
+        ),
+        ("analytical parameter", dreamplace_plc, |_, _, c| {
+            c.analytical.noise_ratio *= 2.0;
+        }),
+        ("analytical seed", dreamplace_plc, |_, _, c| {
+            c.analytical.seed += 1
+        }),
+        ("fd schedule", fd_plc, |_, _, c| {
+            c.fd_schedule.attract[0] *= 2.0
+        }),
+        ("congestion weight", dreamplace_plc, |_, _, c| {
+            c.weights.congestion = 0.25;
+        }),
+        ("smooth range", dreamplace_plc, |_, s, _| {
+            s.smooth_range = 2.0
+        }),
+        ("routing allocation", fd_plc, |_, s, _| {
+            s.hrouting_alloc *= 0.5
+        }),
+        ("padded actions", dreamplace_plc, |_, _, c| {
+            c.padded_action = true
+        }),
+    ];
+    for (name, base_edit, edit) in cases {
+        let mut base = coarse_small_env(38, base_edit);
+        let cells = random_episodes(&mut base, 3);
+        let make = || {
+            coarse_small_env(38, |g, s, c| {
+                base_edit(g, s, c);
+                edit(g, s, c);
+            })
+        };
+        let (mut variant, mut fresh) = (make(), make());
+        fresh.set_end_cache_bytes(0);
+        // The recorded actions are cells (the base's actions); the variant's may be padded.
+        let episodes: Vec<Vec<usize>> = cells
+            .iter()
+            .map(|cells| cells.iter().map(|&c| variant.cell_to_action(c)).collect())
+            .collect();
+        for actions in &episodes {
+            let end = episode_end(&mut variant, actions);
+            assert_eq!(variant.end_cache_hits(), 0, "{name}: shares a cache");
+            assert_eq!(end, episode_end(&mut fresh, actions), "{name}");
+        }
+        // Its own cache works: the same episodes again are restored.
+        for actions in &episodes {
+            episode_end(&mut variant, actions);
+        }
+        assert_eq!(variant.end_cache_hits(), episodes.len() as u64, "{name}");
+        // And the base's is still there.
+        assert_eq!(base.end_cache_len(), cells.len(), "{name}");
+    }
+}
+
+/// `cost_mut` detaches an environment from the shared cache (it may change what the ends depend
+/// on): it gets an empty private cache, and the others keep theirs.
+#[test]
+fn cost_mut_detaches_from_the_shared_cache() {
+    let make = || coarse_small_env(39, |_, _, c| c.std_cell_placer = StdCellPlacer::DreamPlace);
+    let (mut a, mut b) = (make(), make());
+    let episodes = random_episodes(&mut a, 2);
+    let held = a.end_cache_len();
+    assert!(held >= 1);
+    assert_eq!(b.end_cache_len(), held);
+    b.cost_mut();
+    assert_eq!(b.end_cache_len(), 0);
+    assert_eq!(a.end_cache_len(), held, "the others keep theirs");
+    for actions in &episodes {
+        episode_end(&mut b, actions);
+    }
+    assert_eq!(b.end_cache_hits(), 0);
+    assert_eq!(b.end_cache_len(), episodes.len());
+    for actions in &episodes {
+        episode_end(&mut b, actions);
+        episode_end(&mut a, actions);
+    }
+    assert_eq!(b.end_cache_hits(), episodes.len() as u64, "a private cache");
+    assert_eq!(a.end_cache_hits(), episodes.len() as u64);
+    assert_eq!(a.end_cache_len(), held);
 }

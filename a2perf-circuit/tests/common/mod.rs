@@ -100,3 +100,50 @@ pub fn replay(env: &mut dyn Env, seed: u64, actions: &[usize]) -> (f64, bool, us
     }
     panic!("the episode did not end");
 }
+
+/// Synthetic-Small of netlist seed `seed` on the 12×12 grid of [`coarse_small`], built directly
+/// (so that its cache of episode ends can be inspected or turned off); `edit` changes the
+/// generated circuit, its settings or the environment's options first.
+pub fn coarse_small_env(
+    seed: u64,
+    edit: impl FnOnce(
+        &mut a2perf_circuit::GeneratedCircuit,
+        &mut a2perf_circuit::CostSettings,
+        &mut a2perf_circuit::CircuitEnvConfig,
+    ),
+) -> a2perf_circuit::CircuitEnv {
+    let mut g = a2perf_circuit::generate(&a2perf_circuit::GeneratorConfig::small(), seed);
+    let mut settings = g.settings.clone();
+    settings.grid_cols = 12;
+    settings.grid_rows = 12;
+    let mut config = a2perf_circuit::CircuitEnvConfig {
+        id: "CircuitTraining-Synthetic-Small-v0".into(),
+        ..Default::default()
+    };
+    edit(&mut g, &mut settings, &mut config);
+    a2perf_circuit::CircuitEnv::new(&g.netlist, Some(&g.placement), settings, config).unwrap()
+}
+
+/// Everything the last step of an episode returns, floats as bits: replays `actions` from a
+/// reset and returns the final step's reward, info (sorted) and observation.
+pub fn episode_end(env: &mut dyn Env, actions: &[usize]) -> (u64, Vec<(String, u64)>, String) {
+    env.reset(Some(0)).unwrap();
+    for &a in actions {
+        let step = env.step(&Action::Discrete(a)).unwrap();
+        if step.done() {
+            let mut info: Vec<(String, u64)> = step
+                .info
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.to_bits()))
+                .collect();
+            info.sort();
+            // Debug prints floats exactly (shortest round-trip form).
+            return (
+                step.reward.to_bits(),
+                info,
+                format!("{:?}", step.observation),
+            );
+        }
+    }
+    panic!("the episode did not end");
+}
