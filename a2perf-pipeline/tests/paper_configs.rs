@@ -486,3 +486,50 @@ fn the_readme_table_parser_finds_switches_and_skips_prose() {
     assert!(switches_in("`WebNavEnv::a2perf_action` maps one onto the other").is_empty());
     assert!(switches_in("none").is_empty());
 }
+
+/// `suite.circuit.ron` re-runs the circuit cells of `suite.ron` after a change to the circuit
+/// environment, so its experiments must be `suite.ron`'s circuit experiments exactly: same tasks,
+/// algorithms, seeds, budgets, inference, generalization, metrics and dataset steps. Only the
+/// output directory differs.
+#[test]
+fn the_circuit_suite_is_the_paper_suites_circuit_half() {
+    let registry = full_registry();
+    let load = |f: &str| {
+        load_plans(
+            &[root().join("configs/paper").join(f)],
+            &[],
+            None,
+            &registry,
+        )
+        .unwrap_or_else(|e| panic!("{f}: {e}"))
+        .plans
+    };
+    // Everything a run's results depend on, with the output directory written as `<out>`.
+    let key = |p: &ExperimentPlan| {
+        let out = p.output.display().to_string();
+        format!(
+            "{} {:?} {:?} {:?} {:?} {:?} {:?} {:?} {:?}",
+            p.name,
+            p.task,
+            p.algorithm,
+            p.seeds,
+            p.training,
+            p.inference,
+            p.generalization,
+            p.metrics,
+            p.dataset_from
+        )
+        .replace(&out, "<out>")
+    };
+    let circuit = load("suite.circuit.ron");
+    let paper: Vec<ExperimentPlan> = load("suite.ron")
+        .into_iter()
+        .filter(|p| p.task.env_id.starts_with("CircuitTraining"))
+        .collect();
+    assert_eq!(circuit.len(), 6);
+    assert_eq!(paper.len(), 6);
+    assert_ne!(circuit[0].output, paper[0].output);
+    for (c, p) in circuit.iter().zip(&paper) {
+        assert_eq!(key(c), key(p));
+    }
+}
