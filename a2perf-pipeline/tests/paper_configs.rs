@@ -177,6 +177,18 @@ fn every_paper_task_config_loads_plans_and_runs_under_the_profile() {
     assert_eq!(all.len(), 24, "{all:?}");
 }
 
+/// The plans of the suite file `configs/paper/<file>`.
+fn suite_plans(file: &str, registry: &Registry) -> Vec<ExperimentPlan> {
+    load_plans(
+        &[root().join("configs/paper").join(file)],
+        &[],
+        None,
+        registry,
+    )
+    .unwrap_or_else(|e| panic!("{file}: {e}"))
+    .plans
+}
+
 fn walk(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     for entry in std::fs::read_dir(dir).unwrap() {
@@ -258,17 +270,10 @@ fn the_paper_suites_plan_eight_tasks_three_algorithms_three_seeds_with_their_dat
         }
     }
     // The long variant trains longer than the short one, experiment by experiment.
-    let load = |f: &str| {
-        load_plans(
-            &[root().join("configs/paper").join(f)],
-            &[],
-            None,
-            &registry,
-        )
-        .unwrap()
-        .plans
-    };
-    let (short, long) = (load("suite.ron"), load("suite.long.ron"));
+    let (short, long) = (
+        suite_plans("suite.ron", &registry),
+        suite_plans("suite.long.ron", &registry),
+    );
     // Both evaluate every run 20 times, so the reliability metrics have curves to work on.
     for p in short.iter().chain(&long) {
         let t = &p.training;
@@ -494,16 +499,6 @@ fn the_readme_table_parser_finds_switches_and_skips_prose() {
 #[test]
 fn the_circuit_suite_is_the_paper_suites_circuit_half() {
     let registry = full_registry();
-    let load = |f: &str| {
-        load_plans(
-            &[root().join("configs/paper").join(f)],
-            &[],
-            None,
-            &registry,
-        )
-        .unwrap_or_else(|e| panic!("{f}: {e}"))
-        .plans
-    };
     // Everything a run's results depend on, with the output directory written as `<out>`.
     let key = |p: &ExperimentPlan| {
         let out = p.output.display().to_string();
@@ -521,8 +516,8 @@ fn the_circuit_suite_is_the_paper_suites_circuit_half() {
         )
         .replace(&out, "<out>")
     };
-    let circuit = load("suite.circuit.ron");
-    let paper: Vec<ExperimentPlan> = load("suite.ron")
+    let circuit = suite_plans("suite.circuit.ron", &registry);
+    let paper: Vec<ExperimentPlan> = suite_plans("suite.ron", &registry)
         .into_iter()
         .filter(|p| p.task.env_id.starts_with("CircuitTraining"))
         .collect();
