@@ -859,6 +859,10 @@ impl CircuitEnv {
     /// result when these cells were placed before (by this environment or one sharing its
     /// cache). The lock is held for the lookup and the insertion only, never while placing.
     fn place_end(&mut self, macros: MovableMacros) -> Result<(), EnvError> {
+        if self.config.std_cell_placer == StdCellPlacer::None {
+            // Nothing to place, so nothing is cached: no lock, no lookup.
+            return Ok(());
+        }
         let hit = self
             .ends
             .as_ref()
