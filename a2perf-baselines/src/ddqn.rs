@@ -212,6 +212,10 @@ struct DdqnRun {
     next_best: Vec<usize>,
     targets: Vec<f32>,
     dq: Vec<f32>,
+    /// The network's scored actions (see [`DiscreteNet::scored_actions_into`]).
+    scored: Vec<usize>,
+    /// Per sample, the logit column of its action (`None`: not scored).
+    cols: Vec<Option<usize>>,
     total: u64,
     env_steps: u64,
     /// Gradient updates earned and not yet made (`updates_per_step` per environment step).
@@ -261,6 +265,8 @@ impl DdqnRun {
             next_best: Vec::new(),
             targets: Vec::new(),
             dq: Vec::new(),
+            scored: Vec::new(),
+            cols: Vec::new(),
             total: ctx.settings().total_env_steps.max(1),
             env_steps: 0,
             update_credit: 0.0,
@@ -332,48 +338,70 @@ impl DdqnRun {
     /// One update on a replay minibatch: the double-Q targets (online argmax, target
     /// evaluation), the TD loss's gradient step and, every `target_update_period` updates,
     /// the target network's.
+    ///
+    /// It reads the networks' scored logits only ([`DiscreteNet::forward_scored`]: on A2Perf's
+    /// padded circuit canvas, the grid's cells, not the 128·128 actions) and the next
+    /// observations' masks only. That is exact: the scored actions keep the actions' order,
+    /// the others are never legal, so the masked argmax (ties to the lowest action), the
+    /// target values and the gradients are the same as over every action.
     fn update(&mut self, net: &mut DiscreteNet, params: &mut [f32], lr: f32) {
-        let (n, cfg) = (self.n, &self.cfg);
+        let cfg = &self.cfg;
         let sample = &mut self.sample;
         self.replay
-            .sample(cfg.batch_size, &mut self.sample_rng, &mut self.idx, sample);
+            .sample_next_masks(cfg.batch_size, &mut self.sample_rng, &mut self.idx, sample);
         let b = sample.obs.len();
-        net.forward(params, &sample.next);
+        let some = net.scored_actions_into(&mut self.scored);
+        let scored = some.then_some(self.scored.as_slice());
+        net.forward_scored(params, &sample.next);
+        let m = net.logit_width();
         self.next_best.clear();
         for k in 0..b {
-            self.next_best.push(
-                masked::argmax(&net.logits()[k * n..(k + 1) * n], sample.next.mask(k))
-                    .unwrap_or(usize::MAX),
-            );
+            let row = &net.logits()[k * m..(k + 1) * m];
+            let best = match scored {
+                None => masked::argmax(row, sample.next.mask(k)),
+                Some(actions) => masked::argmax_at(row, actions, sample.next.mask(k)),
+            };
+            self.next_best.push(best.unwrap_or(usize::MAX));
         }
-        self.target_net.forward(&self.target_params, &sample.next);
+        self.target_net
+            .forward_scored(&self.target_params, &sample.next);
         self.targets.clear();
         for (k, &best) in self.next_best.iter().enumerate() {
             let boot = if sample.terminated[k] || best == usize::MAX {
                 0.0
             } else {
-                self.target_net.logits()[k * n + best]
+                self.target_net.logits()[k * m + best]
             };
             self.targets.push(sample.rewards[k] + cfg.gamma * boot);
         }
-        net.forward(params, &sample.obs);
+        net.forward_scored(params, &sample.obs);
+        // An action outside the scored ones (never legal, so never taken) would have a `−∞`
+        // Q-value whose gradient no parameter receives: it gets none here either.
+        self.cols.clear();
+        self.cols
+            .extend(sample.act_d[..b].iter().map(|&a| match scored {
+                None => Some(a),
+                Some(actions) => actions.binary_search(&a).ok(),
+            }));
         // `dq` is all zeros between updates (each update clears the entries it set), which
-        // spares a [B, n] fill per update: n is 12,500 for web navigation.
-        ensure(&mut self.dq, b * n);
-        for k in 0..b {
-            let a = sample.act_d[k];
-            let err = net.logits()[k * n + a] - self.targets[k];
+        // spares a [B, m] fill per update: m is 12,500 for web navigation.
+        ensure(&mut self.dq, b * m);
+        for (k, col) in self.cols.iter().enumerate() {
+            let Some(j) = *col else { continue };
+            let err = net.logits()[k * m + j] - self.targets[k];
             let g = if cfg.huber {
                 err.clamp(-1.0, 1.0)
             } else {
                 2.0 * err
             };
-            self.dq[k * n + a] = g / b as f32;
+            self.dq[k * m + j] = g / b as f32;
         }
         self.grads.fill(0.0);
         net.backward(params, &mut self.grads, &sample.obs, &self.dq, None);
-        for (k, &a) in sample.act_d[..b].iter().enumerate() {
-            self.dq[k * n + a] = 0.0;
+        for (k, col) in self.cols.iter().enumerate() {
+            if let Some(j) = *col {
+                self.dq[k * m + j] = 0.0;
+            }
         }
         clip_grad_norm(&mut self.grads, cfg.max_grad_norm);
         self.adam.step(params, &self.grads, lr);

@@ -93,6 +93,11 @@ struct Ws {
     v: [Vec<f32>; 12],
     web: web::WebWs,
     batch: usize,
+    /// Width of a row of `logits`: the number of actions, or of scored actions after a
+    /// [`DiscreteNet::forward_scored`].
+    width: usize,
+    /// Whether the last forward was [`DiscreteNet::forward_scored`].
+    scored: bool,
 }
 
 /// A network mapping observation batches to logits `[B, n]` (or Q-values) and, optionally, state
@@ -256,9 +261,67 @@ impl DiscreteNet {
         self.ws.web.path = path;
     }
 
-    /// Logits of the last forward pass, `[B, n]` (unmasked).
+    /// Logits of the last forward pass, `[B, n]` (unmasked), or `[B, m]` over the
+    /// [scored actions](Self::scored_actions_into) after [`forward_scored`](Self::forward_scored)
+    /// (see [`logit_width`](Self::logit_width)).
     pub fn logits(&self) -> &[f32] {
-        &self.ws.logits[..self.ws.batch * self.n]
+        &self.ws.logits[..self.ws.batch * self.ws.width]
+    }
+
+    /// Width of a row of [`logits`](Self::logits) after the last forward pass.
+    pub fn logit_width(&self) -> usize {
+        self.ws.width
+    }
+
+    /// Writes into `out`, in increasing order, the actions the network scores when that is not
+    /// every action, and returns `true`; returns `false` (and leaves `out` empty) when every
+    /// action is scored. Only A2Perf's padded circuit layout scores fewer: its actions are the
+    /// grid's cells laid out on a 128×128 canvas, and every other action's logit is always
+    /// `−∞` and never legal (the environment masks the padding).
+    ///
+    /// ```
+    /// use a2perf_baselines::model::{DiscreteArch, DiscreteNet};
+    /// use a2perf_baselines::nn::{Activation, Mlp, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let policy = Mlp::new(&mut alloc, &[2, 3], Activation::Relu);
+    /// let net = DiscreteNet::from_arch(DiscreteArch::Flat { policy, value: None }, 3, alloc.len());
+    /// let mut scored = vec![7];
+    /// assert!(!net.scored_actions_into(&mut scored));
+    /// assert!(scored.is_empty());
+    /// ```
+    pub fn scored_actions_into(&self, out: &mut Vec<usize>) -> bool {
+        out.clear();
+        match &self.arch {
+            DiscreteArch::Circuit(c) if c.padded_side > 0 => {
+                let (rows, cols) = c.shape;
+                out.extend((0..c.cells).map(|i| padded_action(i, rows, cols, c.padded_side)));
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Forward pass that computes only the logits of the
+    /// [scored actions](Self::scored_actions_into): [`logits`](Self::logits) is then
+    /// `[B, m]`, column `j` being the `j`-th scored action. Every value is the same, bit for
+    /// bit, as the corresponding one of [`forward`](Self::forward); the padding, always `−∞`,
+    /// is not written. A network that scores every action runs [`forward`](Self::forward).
+    /// [`backward`](Self::backward) then takes logit gradients of the same width.
+    pub fn forward_scored(&mut self, params: &[f32], batch: &ObsBatch) {
+        match &self.arch {
+            DiscreteArch::Circuit(c) if c.padded_side > 0 => {
+                let b = batch.len();
+                let ws = &mut self.ws;
+                ws.batch = b;
+                ws.width = c.cells;
+                ws.scored = true;
+                ensure(&mut ws.logits, b * c.cells);
+                ensure(&mut ws.values, b);
+                ws.values[..b].fill(0.0);
+                circuit_forward(c, params, batch, ws, true);
+            }
+            _ => self.forward(params, batch),
+        }
     }
 
     /// Values of the last forward pass, `[B]` (zeros without a value head).
@@ -272,6 +335,8 @@ impl DiscreteNet {
         let n = self.n;
         let ws = &mut self.ws;
         ws.batch = b;
+        ws.width = n;
+        ws.scored = false;
         ensure(&mut ws.logits, b * n);
         ensure(&mut ws.values, b);
         ws.values[..b].fill(0.0);
@@ -285,13 +350,14 @@ impl DiscreteNet {
                     ws.values[..b].copy_from_slice(y);
                 }
             }
-            DiscreteArch::Circuit(c) => circuit_forward(c, params, batch, ws),
+            DiscreteArch::Circuit(c) => circuit_forward(c, params, batch, ws, false),
             DiscreteArch::Web(w) => web::web_forward(w, params, batch, ws),
         }
     }
 
     /// Backward pass for the last forward: accumulates parameter gradients of
-    /// `Σ dlogits·logits + Σ dvalues·values` into `grads`.
+    /// `Σ dlogits·logits + Σ dvalues·values` into `grads` (`dlogits` as wide as
+    /// [`logits`](Self::logits)).
     pub fn backward(
         &mut self,
         params: &[f32],
@@ -469,7 +535,9 @@ fn circuit_arch(
 /// edges and keep the centre for the logic (the paper's deconvolution head knows positions).
 pub const CELL_POSITION_INPUTS: usize = 4;
 
-fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws) {
+/// The circuit network's forward pass; `scored`: the cells' scores only, `[B, cells]`, even on
+/// the padded canvas.
+fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws, scored: bool) {
     let b = batch.len();
     let (nc, ch, k) = (c.cells, c.channels, c.cell_in.out);
     let (pi, (rows, cols)) = (c.position_inputs, c.shape);
@@ -512,7 +580,7 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
             }
         }
     }
-    if c.padded_side == 0 {
+    if c.padded_side == 0 || scored {
         c.score.forward(params, h, b * nc, &mut ws.logits);
     } else {
         // Score the cells, then lay them out on the padded canvas; the padding is never legal.
@@ -546,7 +614,7 @@ fn circuit_backward(
     let (nc, k) = (c.cells, c.cell_in.out);
     let h_dim = c.global.out();
     let [_gc, cx, h, dh, dgc, dg, dg2, dscores, ..] = &mut ws.v;
-    let dlogits = if c.padded_side == 0 {
+    let dlogits = if c.padded_side == 0 || ws.scored {
         dlogits
     } else {
         // Only the cells' entries depend on the parameters.

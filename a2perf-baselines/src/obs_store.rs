@@ -486,10 +486,15 @@ impl ObsStore {
 
     /// Decodes `slot` into row `row` of `out`.
     pub(crate) fn read(&self, slot: usize, out: &mut ObsBatch, row: usize) {
+        self.read_tensors(slot, out, row);
+        self.read_mask(slot, out, row);
+    }
+
+    /// Decodes every tensor of `slot`, not its mask, into row `row` of `out`.
+    pub(crate) fn read_tensors(&self, slot: usize, out: &mut ObsBatch, row: usize) {
         for i in 0..self.tensors.len() {
             self.read_tensor(slot, i, out, row);
         }
-        self.read_mask(slot, out, row);
     }
 
     /// Decodes tensor `i` of `slot` into row `row` of `out`.
@@ -512,7 +517,13 @@ impl ObsStore {
             // and a replay minibatch decodes hundreds of them per update.
             for (chunk, word) in m.chunks_mut(64).zip(bits) {
                 for (flags, byte) in chunk.chunks_mut(8).zip(word.to_le_bytes()) {
-                    flags.copy_from_slice(&BYTE_FLAGS[usize::from(byte)][..flags.len()]);
+                    let table = &BYTE_FLAGS[usize::from(byte)];
+                    // Eight flags as one fixed-size copy (a slice copy of unknown length is a
+                    // `memmove` call per byte of bits); the mask's last byte may be shorter.
+                    match <&mut [bool; 8]>::try_from(&mut *flags) {
+                        Ok(full) => *full = *table,
+                        Err(_) => flags.copy_from_slice(&table[..flags.len()]),
+                    }
                 }
             }
         }

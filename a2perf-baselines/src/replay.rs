@@ -278,6 +278,30 @@ impl ReplayBuffer {
         idx: &mut Vec<usize>,
         out: &mut ReplaySample,
     ) {
+        self.sample_into(n, rng, idx, out, true);
+    }
+
+    /// As [`sample`](Self::sample), the same transitions, but without decoding the
+    /// observations' action masks (`out.obs`'s masks keep whatever they held): Q-learning reads
+    /// only the next observations' masks, and a mask can hold 16,384 actions.
+    pub fn sample_next_masks(
+        &self,
+        n: usize,
+        rng: &mut RngStream,
+        idx: &mut Vec<usize>,
+        out: &mut ReplaySample,
+    ) {
+        self.sample_into(n, rng, idx, out, false);
+    }
+
+    fn sample_into(
+        &self,
+        n: usize,
+        rng: &mut RngStream,
+        idx: &mut Vec<usize>,
+        out: &mut ReplaySample,
+        obs_masks: bool,
+    ) {
         idx.clear();
         idx.extend((0..n).map(|_| rng.index(self.size)));
         out.obs.resize(n);
@@ -287,7 +311,11 @@ impl ReplayBuffer {
         out.rewards.clear();
         out.terminated.clear();
         for (k, &i) in idx.iter().enumerate() {
-            self.store.read(self.obs_slot[i], &mut out.obs, k);
+            if obs_masks {
+                self.store.read(self.obs_slot[i], &mut out.obs, k);
+            } else {
+                self.store.read_tensors(self.obs_slot[i], &mut out.obs, k);
+            }
             self.store.read(self.next_slot[i], &mut out.next, k);
             out.act_d.push(self.act_d[i]);
             out.act_c

@@ -165,11 +165,40 @@ fn padded_scores_and_gradients_are_the_grid_ones_at_the_circuit_crates_padded_ac
             Some(&dvalues),
         );
         assert!(grads[0].iter().any(|g| *g != 0.0));
-        assert_eq!(
-            grads[0].iter().map(|g| g.to_bits()).collect::<Vec<_>>(),
-            grads[1].iter().map(|g| g.to_bits()).collect::<Vec<_>>(),
-            "{id}: gradients differ"
+        let bits = |g: &[f32]| g.iter().map(|g| g.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&grads[0]), bits(&grads[1]), "{id}: gradients differ");
+
+        // The scored pass (what DDQN learns through): the padded network's logits over its
+        // scored actions, the circuit crate's padded actions of the cells in cell order, are
+        // the grid's logits bit for bit, and so are the gradients from them.
+        let mut scored = Vec::new();
+        assert!(!nets[0].scored_actions_into(&mut scored), "{id}");
+        assert!(nets[1].scored_actions_into(&mut scored), "{id}");
+        let expected: Vec<usize> = (0..cells)
+            .map(|cell| cell_to_padded_action(cell, cols, rows))
+            .collect();
+        assert_eq!(scored, expected, "{id}: scored actions");
+        nets[0].forward(&weights, &batches[0]);
+        nets[1].forward_scored(&weights, &batches[1]);
+        assert_eq!(nets[1].logit_width(), cells, "{id}");
+        assert_eq!(bits(nets[0].logits()), bits(nets[1].logits()), "{id}");
+        assert_eq!(nets[0].values(), nets[1].values(), "{id}: value head");
+        let mut scored_grads = vec![0.0f32; weights.len()];
+        nets[1].backward(
+            &weights,
+            &mut scored_grads,
+            &batches[1],
+            &dplain,
+            Some(&dvalues),
         );
+        assert_eq!(
+            bits(&grads[0]),
+            bits(&scored_grads),
+            "{id}: scored gradients"
+        );
+        // A full forward afterwards is the padded one again.
+        nets[1].forward(&weights, &batches[1]);
+        assert_eq!(nets[1].logit_width(), n, "{id}");
     }
 }
 

@@ -403,3 +403,37 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// `argmax_at` over increasing scored actions (every other action illegal and `−∞`, as
+    /// the padding of A2Perf's circuit canvas) picks what `argmax` picks over every action,
+    /// ties and all-illegal rows included.
+    #[test]
+    fn argmax_at_picks_the_full_argmax(
+        picks in proptest::collection::vec((0usize..3, 0u8..4, any::<bool>()), 0..40),
+    ) {
+        // Each entry: a gap before the scored action, a logit from a few values (ties), legal.
+        let mut actions = Vec::new();
+        let (mut logits, mut legal) = (Vec::new(), Vec::new());
+        let mut at = 0;
+        for (gap, z, ok) in &picks {
+            at += gap;
+            actions.push(at);
+            logits.push(f32::from(*z) - 1.5);
+            legal.push(*ok);
+            at += 1;
+        }
+        let n = at + 2;
+        let mut full = vec![f32::NEG_INFINITY; n];
+        let mut mask = vec![false; n];
+        for (j, &a) in actions.iter().enumerate() {
+            full[a] = logits[j];
+            mask[a] = legal[j];
+        }
+        let col = masked::argmax_at(&logits, &actions, Some(&mask));
+        prop_assert_eq!(col.map(|j| actions[j]), masked::argmax(&full, Some(&mask)));
+        prop_assert_eq!(masked::argmax_at(&logits, &actions, None), masked::argmax(&logits, None));
+    }
+}

@@ -59,6 +59,28 @@ pub mod masked {
         best.map(|(i, _)| i)
     }
 
+    /// [`argmax`] over a subset of the actions: `logits[j]` is the logit of action
+    /// `actions[j]`, whose legality `mask[actions[j]]` says. Returns the column `j` of the
+    /// largest legal logit (ties: lowest column); `None` when none is legal. With `actions` in
+    /// increasing order and every other action illegal, it picks the action [`argmax`] picks
+    /// over all of them.
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::dist::masked;
+    /// let mask = [false, true, false, true, true];
+    /// assert_eq!(masked::argmax_at(&[9.0, 2.0, 2.0], &[0, 3, 4], Some(&mask)), Some(1));
+    /// assert_eq!(masked::argmax_at(&[9.0], &[2], Some(&mask)), None);
+    /// ```
+    pub fn argmax_at(logits: &[f32], actions: &[usize], mask: Option<&[bool]>) -> Option<usize> {
+        let mut best: Option<(usize, f32)> = None;
+        for (j, (&z, &a)) in logits.iter().zip(actions).enumerate() {
+            if legal(mask, a) && best.is_none_or(|(_, b)| z > b) {
+                best = Some((j, z));
+            }
+        }
+        best.map(|(j, _)| j)
+    }
+
     /// Draws an index from masked log-probabilities (inverse CDF).
     pub fn sample(logp: &[f32], rng: &mut RngStream) -> Option<usize> {
         let u = rng.uniform();
