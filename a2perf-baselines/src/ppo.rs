@@ -216,7 +216,14 @@ struct Forward {
 impl Forward {
     /// Forward over all rows of `batch`; returns nothing, results read from the nets/workspaces.
     fn run(&mut self, policy: &mut NetPolicy, batch: &ObsBatch) {
+        self.run_as(policy, batch, false);
+    }
+
+    /// [`run`](Self::run), with a discrete network's logits over its scored actions only
+    /// when `scored` (see [`DiscreteNet::forward_scored`]).
+    fn run_as(&mut self, policy: &mut NetPolicy, batch: &ObsBatch, scored: bool) {
         match &mut policy.head {
+            Head::Discrete(net) if scored => net.forward_scored(&policy.params, batch),
             Head::Discrete(net) => net.forward(&policy.params, batch),
             Head::Gaussian(g) => {
                 batch.concat_into(&mut self.x);
@@ -319,6 +326,10 @@ struct PpoRun {
     /// The rollout's rows in minibatch order (shuffled at every epoch).
     order: Vec<usize>,
     dlogits: Vec<f32>,
+    /// The network's scored actions (see [`DiscreteNet::scored_actions_into`]) and one
+    /// row's mask over them.
+    scored: Vec<usize>,
+    scored_mask: Vec<bool>,
     dvalues: Vec<f32>,
     dmean: Vec<f32>,
     dlog_std: Vec<f32>,
@@ -383,6 +394,8 @@ impl PpoRun {
             noise: vec![0.0; act_dim],
             order: (0..rows).collect(),
             dlogits: Vec::new(),
+            scored: Vec::new(),
+            scored_mask: Vec::new(),
             dvalues: Vec::new(),
             dmean: Vec::new(),
             dlog_std: vec![0.0; act_dim],
@@ -541,7 +554,7 @@ impl PpoRun {
     /// value regression.
     fn minibatch_step(&mut self, policy: &mut NetPolicy, chunk: &[usize], lr: f32) {
         self.mb.gather(&self.ro.obs, chunk);
-        self.fw.run(policy, &self.mb);
+        self.fw.run_as(policy, &self.mb, true);
         let bsz = chunk.len();
         let adv = AdvantageNorm::of(&self.ro.adv, chunk);
         let inv_b = 1.0 / bsz as f32;
@@ -562,6 +575,11 @@ impl PpoRun {
 
     /// The gradient of a masked categorical policy and its value head (in `grads`), with the
     /// minibatch's value gradients in `dvalues`.
+    ///
+    /// The logits are the network's scored ones (the minibatch's forward is
+    /// [`DiscreteNet::forward_scored`]: on A2Perf's padded circuit canvas the grid's cells).
+    /// That is exact: the other actions are never legal, and every sum over the legal actions
+    /// (softmax, entropy) runs in the same order over the same values.
     fn discrete_gradient(
         &mut self,
         net: &mut DiscreteNet,
@@ -569,24 +587,40 @@ impl PpoRun {
         chunk: &[usize],
         adv: &AdvantageNorm,
     ) {
-        let (n_actions, bsz) = (self.n_actions, chunk.len());
+        let (m, bsz) = (net.logit_width(), chunk.len());
+        let some = net.scored_actions_into(&mut self.scored);
         let inv_b = 1.0 / bsz as f32;
-        ensure(&mut self.dlogits, bsz * n_actions);
-        self.dlogits[..bsz * n_actions].fill(0.0);
-        ensure(&mut self.fw.logp, n_actions);
+        ensure(&mut self.dlogits, bsz * m);
+        self.dlogits[..bsz * m].fill(0.0);
+        ensure(&mut self.fw.logp, m);
         for (k, &r) in chunk.iter().enumerate() {
-            let logits = &net.logits()[k * n_actions..(k + 1) * n_actions];
-            let lp = &mut self.fw.logp[..n_actions];
-            masked::log_softmax(logits, self.mb.mask(k), lp);
-            let a = self.ro.act_d[r];
-            let g = surrogate_grad(
-                lp[a],
-                self.ro.logp[r],
-                adv.apply(self.ro.adv[r]),
-                self.cfg.clip_ratio,
-            );
-            let dl = &mut self.dlogits[k * n_actions..(k + 1) * n_actions];
-            masked::grad_logp(lp, a, g * inv_b, dl);
+            let logits = &net.logits()[k * m..(k + 1) * m];
+            let lp = &mut self.fw.logp[..m];
+            let (mask, a) = match (some, self.mb.mask(k)) {
+                (false, mask) => (mask, Some(self.ro.act_d[r])),
+                (true, full) => {
+                    self.scored_mask.clear();
+                    if let Some(full) = full {
+                        self.scored_mask
+                            .extend(self.scored.iter().map(|&a| full[a]));
+                    }
+                    let col = self.scored.binary_search(&self.ro.act_d[r]).ok();
+                    (full.map(|_| self.scored_mask.as_slice()), col)
+                }
+            };
+            masked::log_softmax(logits, mask, lp);
+            let dl = &mut self.dlogits[k * m..(k + 1) * m];
+            // An action outside the scored ones is never legal, so never sampled: were it in
+            // the rollout, its surrogate would have no gradient to give the scored logits.
+            if let Some(a) = a {
+                let g = surrogate_grad(
+                    lp[a],
+                    self.ro.logp[r],
+                    adv.apply(self.ro.adv[r]),
+                    self.cfg.clip_ratio,
+                );
+                masked::grad_logp(lp, a, g * inv_b, dl);
+            }
             masked::grad_entropy(lp, -self.cfg.entropy_coef * inv_b, dl);
         }
         net.backward(
