@@ -8,6 +8,8 @@
 //! `/proc/thread-self/schedstat`, Linux only, over rounds of updates), which a loaded machine
 //! disturbs less.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::hint::black_box;
 
@@ -21,12 +23,6 @@ const BATCH: usize = 256;
 /// Updates per timed round of thread CPU time.
 const ROUND: usize = 40;
 
-/// Nanoseconds this thread has run on a CPU, when the kernel says.
-fn thread_cpu_ns() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    s.split_whitespace().next()?.parse().ok()
-}
-
 /// `2 * BATCH` observations of random legal play on five generated difficulty-1 websites, as
 /// consecutive (observation, next observation) rows.
 fn transitions(layout: &ObsLayout) -> Option<(ObsBatch, ObsBatch)> {
@@ -36,23 +32,7 @@ fn transitions(layout: &ObsLayout) -> Option<(ObsBatch, ObsBatch)> {
     let mut env = reg
         .make_env("WebNavigation-Difficulty-01-v0", &params)
         .ok()?;
-    let space = env.spec().action_space.clone();
-    let mut rng = RngStream::new(0, "bench/play");
-    let (mut obs, mut next) = (ObsBatch::new(layout), ObsBatch::new(layout));
-    let mut cur = env.reset(Some(0)).ok()?;
-    let mut episode = 0;
-    while obs.len() < BATCH {
-        let row = obs.push(&cur).ok()?;
-        let action = space.sample(&mut rng, obs.mask(row))?;
-        let step = env.step(&action).ok()?;
-        next.push(&step.observation).ok()?;
-        cur = if step.terminated || step.truncated {
-            episode += 1;
-            env.reset(Some(episode)).ok()?
-        } else {
-            step.observation
-        };
-    }
+    let (obs, next, _) = common::random_play(env.as_mut(), layout, BATCH)?;
     Some((obs, next))
 }
 
@@ -111,26 +91,14 @@ fn web_update(c: &mut Criterion) {
         adam.step(&mut p, &grads, 4e-5);
         black_box(&p);
     };
-    // The kernel may account thread time in scheduler ticks (4 ms here), so time rounds of
-    // updates and report the median round's mean.
-    let mut cpu = Vec::new();
-    for _ in 0..7 {
-        let t0 = thread_cpu_ns();
-        for _ in 0..ROUND {
-            update();
-        }
-        if let (Some(a), Some(b)) = (t0, thread_cpu_ns()) {
-            cpu.push((b - a) as f64 / ROUND as f64);
-        }
-    }
+    let cpu = common::thread_cpu_rounds(7, ROUND, &mut update);
     if !cpu.is_empty() {
-        cpu.sort_by(f64::total_cmp);
         eprintln!(
             "ddqn_update/web_paper_dims_batch_256: thread CPU per update, median of {} rounds of \
              {ROUND}: {:.2} ms (rounds {:.2?} ms)",
             cpu.len(),
-            cpu[cpu.len() / 2] / 1e6,
-            cpu.iter().map(|c| c / 1e6).collect::<Vec<_>>()
+            cpu[cpu.len() / 2],
+            cpu
         );
     }
     c.bench_function("ddqn_update/web_paper_dims_batch_256", |b| {

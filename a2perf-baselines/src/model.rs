@@ -559,10 +559,14 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
             }
         }
         if pi == CELL_POSITION_INPUTS && rows * cols == nc {
-            for i in 0..nc {
+            for (i, cell) in dst.chunks_exact_mut(stride).enumerate() {
                 let x = 2.0 * ((i % cols) as f32 + 0.5) / cols as f32 - 1.0;
                 let y = 2.0 * ((i / cols) as f32 + 0.5) / rows as f32 - 1.0;
-                dst[i * stride + ch..(i + 1) * stride].copy_from_slice(&[x, y, x.abs(), y.abs()]);
+                // Four stores, not a copy of a slice of unknown length (a `memmove` call per
+                // cell and row).
+                if let Some(p) = cell.last_chunk_mut::<CELL_POSITION_INPUTS>() {
+                    *p = [x, y, x.abs(), y.abs()];
+                }
             }
         } else if pi > 0 {
             for i in 0..nc {
