@@ -275,7 +275,6 @@ struct SacRun {
     dq: Vec<f32>,
     dqin: Vec<f32>,
     dout: Vec<f32>,
-    scratch: Vec<f32>,
     qa: Vec<f32>,
     qb: Vec<f32>,
     out_buf: Vec<f32>,
@@ -371,7 +370,6 @@ impl SacRun {
             dq: Vec::new(),
             dqin: Vec::new(),
             dout: Vec::new(),
-            scratch: Vec::new(),
             qa: Vec::new(),
             qb: Vec::new(),
             out_buf: Vec::new(),
@@ -598,7 +596,6 @@ impl SacRun {
             self.qb[..b].copy_from_slice(self.qnet.forward(&c1.params, &self.qin, b, &mut c1.ws));
         }
         ensure(&mut self.dqin, b * (od + d));
-        ensure(&mut self.scratch, self.critics[0].params.len());
         ensure(&mut self.dout, b * 2 * d);
         self.dout[..b * 2 * d].fill(0.0);
         for (ci, c) in self.critics.iter_mut().enumerate() {
@@ -607,15 +604,10 @@ impl SacRun {
                 let pick = if self.qa[k] <= self.qb[k] { 0 } else { 1 };
                 self.dq[k] = if pick == ci { -1.0 / b as f32 } else { 0.0 };
             }
-            self.scratch.fill(0.0);
-            self.qnet.backward(
-                &c.params,
-                &mut self.scratch,
-                &self.qin,
-                &self.dq,
-                &mut c.ws,
-                Some(&mut self.dqin),
-            );
+            // The actor needs the critic's gradient with respect to its input (the action)
+            // only: no parameter gradients.
+            self.qnet
+                .backward_input(&c.params, &self.dq, &mut c.ws, &mut self.dqin);
             for k in 0..b {
                 let da = &self.dqin[k * (od + d) + od..(k + 1) * (od + d)];
                 let row = &out[k * 2 * d..(k + 1) * 2 * d];

@@ -437,3 +437,33 @@ proptest! {
         prop_assert_eq!(masked::argmax_at(&logits, &actions, None), masked::argmax(&logits, None));
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// `Mlp::backward_input` writes the input gradient `Mlp::backward` writes, bit for bit,
+    /// and touches no parameter gradient (SAC's actor step relies on it).
+    #[test]
+    fn backward_input_is_backwards_input_gradient(
+        seed in 0u64..1000, inp in 1usize..9, hidden in 1usize..7, out in 1usize..4,
+        batch in 1usize..6, tanh in any::<bool>(),
+    ) {
+        let act = if tanh { Activation::Tanh } else { Activation::Relu };
+        let mut alloc = ParamAlloc::new();
+        let mlp = Mlp::new(&mut alloc, &[inp, hidden, hidden, out], act);
+        let mut rng = RngStream::new(seed, "backward_input");
+        let mut params = vec![0.0f32; alloc.len()];
+        mlp.init(&mut params, &mut rng, 1.0);
+        let x: Vec<f32> = (0..batch * inp).map(|_| rng.normal() as f32).collect();
+        let dout: Vec<f32> = (0..batch * out).map(|_| rng.normal() as f32).collect();
+        let mut ws = MlpWs::default();
+        mlp.forward(&params, &x, batch, &mut ws);
+        let mut grads = vec![0.0f32; params.len()];
+        let mut dx = vec![0.0f32; batch * inp];
+        mlp.backward(&params, &mut grads, &x, &dout, &mut ws, Some(&mut dx));
+        let mut alone = vec![0.0f32; batch * inp];
+        mlp.backward_input(&params, &dout, &mut ws, &mut alone);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        prop_assert_eq!(bits(&dx), bits(&alone));
+    }
+}

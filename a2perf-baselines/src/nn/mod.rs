@@ -132,11 +132,21 @@ impl Linear {
             }
         }
         if let Some(dx) = dx {
-            let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
-            let dxm =
-                MatMut::from_row_major_slice_mut(&mut dx[..batch * self.inp], batch, self.inp);
-            matmul(dxm, Accum::Replace, dym, wm, 1.0f32, Par::Seq);
+            self.backward_input(params, dy, batch, dx);
         }
+    }
+
+    /// Writes the input gradient `dx = dy W` alone, the same values as
+    /// [`backward`](Self::backward)'s, without the parameter gradients: for a caller that
+    /// needs the gradient with respect to the input only (SAC's actor, through its critics).
+    pub fn backward_input(&self, params: &[f32], dy: &[f32], batch: usize, dx: &mut [f32]) {
+        if batch == 0 {
+            return;
+        }
+        let dym = MatRef::from_row_major_slice(&dy[..batch * self.out], batch, self.out);
+        let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
+        let dxm = MatMut::from_row_major_slice_mut(&mut dx[..batch * self.inp], batch, self.inp);
+        matmul(dxm, Accum::Replace, dym, wm, 1.0f32, Par::Seq);
     }
 }
 
@@ -356,6 +366,45 @@ impl Mlp {
         dout: &[f32],
         ws: &'w mut MlpWs,
     ) -> &'w [f32] {
+        self.backward_layers(params, Some(grads), dout, ws)
+    }
+
+    /// The input gradient `dx` `[batch, inp]` of the last forward alone, the same values as
+    /// [`backward`](Self::backward) writes, without any parameter gradient (half the
+    /// multiplications of a backward pass).
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::{Activation, Mlp, MlpWs, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let mlp = Mlp::new(&mut alloc, &[3, 4, 2], Activation::Tanh);
+    /// let params: Vec<f32> = (0..alloc.len()).map(|i| (i as f32 * 0.37).sin()).collect();
+    /// let (x, dout) = ([0.5, -1.0, 2.0], [1.0, -0.5]);
+    /// let mut ws = MlpWs::default();
+    /// mlp.forward(&params, &x, 1, &mut ws);
+    /// let (mut grads, mut dx) = (vec![0.0; params.len()], [0.0; 3]);
+    /// mlp.backward(&params, &mut grads, &x, &dout, &mut ws, Some(&mut dx));
+    /// let mut dx_alone = [0.0; 3];
+    /// mlp.backward_input(&params, &dout, &mut ws, &mut dx_alone);
+    /// assert_eq!(dx, dx_alone);
+    /// ```
+    pub fn backward_input(&self, params: &[f32], dout: &[f32], ws: &mut MlpWs, dx: &mut [f32]) {
+        let batch = ws.batch;
+        let Some(first) = self.layers.first() else {
+            return;
+        };
+        let d = self.backward_layers(params, None, dout, ws);
+        first.backward_input(params, d, batch, dx);
+    }
+
+    /// [`backward_to_first`](Self::backward_to_first), accumulating parameter gradients only
+    /// when `grads` is given.
+    fn backward_layers<'w>(
+        &self,
+        params: &[f32],
+        mut grads: Option<&mut [f32]>,
+        dout: &[f32],
+        ws: &'w mut MlpWs,
+    ) -> &'w [f32] {
         let batch = ws.batch;
         let n = self.layers.len();
         let MlpWs { outs, d_a, d_b, .. } = ws;
@@ -370,7 +419,10 @@ impl Mlp {
         for i in (1..n).rev() {
             let layer = &self.layers[i];
             ensure(d_b, batch * layer.inp);
-            layer.backward(params, grads, &outs[i - 1], d_a, batch, Some(d_b));
+            match grads.as_deref_mut() {
+                Some(g) => layer.backward(params, g, &outs[i - 1], d_a, batch, Some(d_b)),
+                None => layer.backward_input(params, d_a, batch, d_b),
+            }
             self.activation.backward(
                 &outs[i - 1][..batch * layer.inp],
                 &mut d_b[..batch * layer.inp],
