@@ -92,11 +92,18 @@ impl Linear {
     pub fn forward(&self, params: &[f32], x: &[f32], batch: usize, y: &mut [f32]) {
         let bias = &params[self.b_range()];
         let y = &mut y[..batch * self.out];
-        for row in y.chunks_exact_mut(self.out) {
-            row.copy_from_slice(bias);
-        }
         if batch == 0 {
             return;
+        }
+        // Every row starts as the bias: the first row copied, then the filled rows doubled
+        // (a copy per row is a `memmove` call per row, and the circuit network's per-cell
+        // layer has batch × cells rows of 50).
+        y[..self.out].copy_from_slice(bias);
+        let mut filled = self.out;
+        while filled < y.len() {
+            let n = filled.min(y.len() - filled);
+            y.copy_within(..n, filled);
+            filled += n;
         }
         let xm = MatRef::from_row_major_slice(&x[..batch * self.inp], batch, self.inp);
         let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
