@@ -96,8 +96,6 @@ struct Ws {
     /// Width of a row of `logits`: the number of actions, or of scored actions after a
     /// [`DiscreteNet::forward_scored`].
     width: usize,
-    /// Whether the last forward was [`DiscreteNet::forward_scored`].
-    scored: bool,
 }
 
 /// A network mapping observation batches to logits `[B, n]` (or Q-values) and, optionally, state
@@ -308,20 +306,7 @@ impl DiscreteNet {
     /// is not written. A network that scores every action runs [`forward`](Self::forward).
     /// [`backward`](Self::backward) then takes logit gradients of the same width.
     pub fn forward_scored(&mut self, params: &[f32], batch: &ObsBatch) {
-        match &self.arch {
-            DiscreteArch::Circuit(c) if c.padded_side > 0 => {
-                let b = batch.len();
-                let ws = &mut self.ws;
-                ws.batch = b;
-                ws.width = c.cells;
-                ws.scored = true;
-                ensure(&mut ws.logits, b * c.cells);
-                ensure(&mut ws.values, b);
-                ws.values[..b].fill(0.0);
-                circuit_forward(c, params, batch, ws, true);
-            }
-            _ => self.forward(params, batch),
-        }
+        self.forward_as(params, batch, true);
     }
 
     /// Values of the last forward pass, `[B]` (zeros without a value head).
@@ -331,12 +316,19 @@ impl DiscreteNet {
 
     /// Forward pass over every row of `batch`.
     pub fn forward(&mut self, params: &[f32], batch: &ObsBatch) {
+        self.forward_as(params, batch, false);
+    }
+
+    /// [`forward`](Self::forward), or [`forward_scored`](Self::forward_scored) when `scored`.
+    fn forward_as(&mut self, params: &[f32], batch: &ObsBatch, scored: bool) {
         let b = batch.len();
-        let n = self.n;
+        let n = match &self.arch {
+            DiscreteArch::Circuit(c) if scored => c.cells,
+            _ => self.n,
+        };
         let ws = &mut self.ws;
         ws.batch = b;
         ws.width = n;
-        ws.scored = false;
         ensure(&mut ws.logits, b * n);
         ensure(&mut ws.values, b);
         ws.values[..b].fill(0.0);
@@ -350,7 +342,7 @@ impl DiscreteNet {
                     ws.values[..b].copy_from_slice(y);
                 }
             }
-            DiscreteArch::Circuit(c) => circuit_forward(c, params, batch, ws, false),
+            DiscreteArch::Circuit(c) => circuit_forward(c, params, batch, ws, scored),
             DiscreteArch::Web(w) => web::web_forward(w, params, batch, ws),
         }
     }
@@ -618,7 +610,8 @@ fn circuit_backward(
     let (nc, k) = (c.cells, c.cell_in.out);
     let h_dim = c.global.out();
     let [_gc, cx, h, dh, dgc, dg, dg2, dscores, ..] = &mut ws.v;
-    let dlogits = if c.padded_side == 0 || ws.scored {
+    // One entry per cell already: the unpadded layout, or a scored forward.
+    let dlogits = if ws.width == nc {
         dlogits
     } else {
         // Only the cells' entries depend on the parameters.
