@@ -675,6 +675,7 @@ pub fn collect(registry: &Registry, args: &CollectArgs) -> Result<()> {
         },
         one_sigma: args.one_sigma,
         show_progress: !args.quiet,
+        cancel: Default::default(),
     };
     let out = args.output.clone().unwrap_or_else(|| {
         runs[0]

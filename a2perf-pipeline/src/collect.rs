@@ -11,6 +11,10 @@
 //! | `a2perf_dataset.json` | [`DatasetInfo`]: level, checkpoints, training sample cost and how it was obtained |
 //! | `data/` | the same episodes in Minari's layout (`arrow` storage), see [`super::minari`] |
 //!
+//! A dataset is written into `OUT/.<dataset_id>.partial/` and renamed into place once complete,
+//! so an interrupted collection (SIGTERM, a crash) never leaves a partial dataset where a
+//! finished one is expected; the next collection replaces the stage.
+//!
 //! Each run directory also gets `collect/evaluation.json` (every checkpoint's returns and
 //! training energy, as the original's `policies/evaluation.json`).
 
@@ -182,6 +186,9 @@ pub fn collect_levels(
             let mut policy = policies.policy(&run, path, &spec)?;
             let mut returns = Vec::with_capacity(opts.eval_episodes);
             for i in 0..opts.eval_episodes {
+                if opts.cancel.is_cancelled() {
+                    return Err(PipelineError::Cancelled);
+                }
                 let seed = seeds.derive_index(i as u64).next_u64();
                 let ep = located_rollout(
                     env.as_mut(),
@@ -284,16 +291,56 @@ fn write_dataset(
 ) -> Result<DatasetInfo> {
     let id = dataset_id(task, &run.record.task.env_id, level);
     let dir = out.join(&id);
-    if dir.join(DATASET_INFO_FILE).is_file() {
-        // Ours, from an earlier collect: replace it whole so no stale episode survives.
-        std::fs::remove_dir_all(&dir).map_err(io_err(&dir))?;
-    } else if dir.read_dir().is_ok_and(|mut d| d.next().is_some()) {
+    let ours = dir.join(DATASET_INFO_FILE).is_file();
+    if !ours && dir.read_dir().is_ok_and(|mut d| d.next().is_some()) {
         return Err(PipelineError::Invalid(format!(
-            "{}: exists and was not written by `a2perf collect`; refusing to overwrite it",
+            "{}: exists without `{DATASET_INFO_FILE}`, so it is not a dataset `a2perf collect` \
+             finished; refusing to overwrite it (remove it to collect here)",
             dir.display()
         )));
     }
-    std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
+    // Written whole into a staging directory, then moved into place: an interrupted collection
+    // leaves no partial dataset behind, and the stage of one is replaced by the next attempt.
+    let stage = out.join(format!(".{id}.partial"));
+    if stage.exists() {
+        std::fs::remove_dir_all(&stage).map_err(io_err(&stage))?;
+    }
+    std::fs::create_dir_all(&stage).map_err(io_err(&stage))?;
+    let info = match fill_dataset(
+        registry, source, run, task, level, pool, &stage, &dir, opts, mu_sigma,
+    ) {
+        Ok(info) => info,
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&stage);
+            return Err(e);
+        }
+    };
+    if ours {
+        // Ours, from an earlier collect: replaced whole so no stale episode survives.
+        std::fs::remove_dir_all(&dir).map_err(io_err(&dir))?;
+    } else if dir.is_dir() {
+        std::fs::remove_dir(&dir).map_err(io_err(&dir))?;
+    }
+    std::fs::rename(&stage, &dir).map_err(io_err(&dir))?;
+    Ok(info)
+}
+
+/// Rolls out the episodes of [`write_dataset`] and writes their files into `stage`; the
+/// dataset's recorded path is `dir`, where it is moved once complete.
+#[allow(clippy::too_many_arguments)]
+fn fill_dataset(
+    registry: &Registry,
+    source: &mut dyn PolicySource,
+    run: &LoadedRun,
+    task: &str,
+    level: Level,
+    pool: &[(&LoadedRun, &CheckpointEval)],
+    stage: &Path,
+    dir: &Path,
+    opts: &CollectOptions,
+    mu_sigma: [f64; 2],
+) -> Result<DatasetInfo> {
+    let id = dataset_id(task, &run.record.task.env_id, level);
     let mut env = run.make_env(registry)?;
     let spec = env.spec().clone();
     let mut rng = RngStream::new(0, &format!("collect/{task}/{}", level.name()));
@@ -307,6 +354,9 @@ fn write_dataset(
         opts.show_progress,
     );
     for e in 0..opts.dataset_episodes {
+        if opts.cancel.is_cancelled() {
+            return Err(PipelineError::Cancelled);
+        }
         // Checkpoints are drawn with replacement, as the original's `df.sample(replace=True)`.
         let k = rng.index(pool.len());
         let seed = rng.next_u64();
@@ -339,7 +389,7 @@ fn write_dataset(
             truncations: ep.transitions.iter().map(|t| t.truncated).collect(),
             seed,
         };
-        let data_dir = dir.join("data");
+        let data_dir = stage.join("data");
         minari::write_episode(
             &data_dir,
             e,
@@ -366,7 +416,7 @@ fn write_dataset(
     used.dedup();
     let info = DatasetInfo {
         dataset_id: id,
-        path: dir.clone(),
+        path: dir.to_path_buf(),
         task: task.into(),
         env_id: run.record.task.env_id.clone(),
         env_params: run.record.task.env_params.clone(),
@@ -379,7 +429,7 @@ fn write_dataset(
         cost_rule: opts.cost,
         level_mu_sigma: mu_sigma,
     };
-    let samples_file = dir.join("samples.json");
+    let samples_file = stage.join("samples.json");
     Dataset {
         env_id: Some(spec.id.clone()),
         samples,
@@ -392,14 +442,14 @@ fn write_dataset(
             reason: other.to_string(),
         },
     })?;
-    write_json_atomic(&dir.join("episodes.json"), &episodes)?;
-    write_json_atomic(&dir.join(DATASET_INFO_FILE), &info)?;
+    write_json_atomic(&stage.join("episodes.json"), &episodes)?;
+    write_json_atomic(&stage.join(DATASET_INFO_FILE), &info)?;
     let mut extra = serde_json::Map::new();
     extra.insert(
         "a2perf".into(),
         serde_json::to_value(&info).map_err(|e| PipelineError::Invalid(e.to_string()))?,
     );
-    let data_dir = dir.join("data");
+    let data_dir = stage.join("data");
     minari::write_metadata(
         &data_dir,
         &info.dataset_id,

@@ -89,6 +89,11 @@ pub struct CollectOptions {
     pub one_sigma: bool,
     /// Show progress bars.
     pub show_progress: bool,
+    /// Stops the collection before its next episode once cancelled (SIGTERM, Ctrl-C), with
+    /// [`PipelineError::Cancelled`](crate::PipelineError::Cancelled). A dataset is written to a
+    /// staging directory and moved into place whole, so an interrupted collection leaves no
+    /// partial dataset; collecting again gives the same samples.
+    pub cancel: a2perf_core::CancelToken,
 }
 
 impl Default for CollectOptions {
@@ -99,6 +104,7 @@ impl Default for CollectOptions {
             cost: CostRule::Measured,
             one_sigma: false,
             show_progress: false,
+            cancel: a2perf_core::CancelToken::new(),
         }
     }
 }

@@ -500,6 +500,7 @@ impl DatasetStep {
             cost,
             one_sigma: self.one_sigma,
             show_progress: false,
+            cancel: Default::default(),
         })
     }
 }

@@ -145,11 +145,13 @@ pub fn check_trained(summary: &TrainSummary, cancel: &CancelToken) -> Result<()>
 /// the (trained) runs of its source experiments, and records its provenance in the plan. Nothing
 /// is collected when every run of the experiment is complete (the training phase skips them) and
 /// the dataset exists; otherwise it is collected again — deterministically, so an interrupted
-/// run resumes on the same data.
+/// run resumes on the same data. Stops before its next episode once `cancel` fires
+/// ([`PipelineError::Cancelled`]), leaving no partial dataset.
 pub fn collect_dataset(
     registry: &Registry,
     plan: &mut ExperimentPlan,
     show_progress: bool,
+    cancel: &CancelToken,
 ) -> Result<()> {
     let Some(source) = plan.dataset_from.clone() else {
         return Ok(());
@@ -172,6 +174,7 @@ pub fn collect_dataset(
         let level = source.step.level()?;
         let mut opts = source.step.collect_options()?;
         opts.show_progress = show_progress;
+        opts.cancel = cancel.clone();
         let summary = crate::collect::collect_levels(
             registry,
             &source.runs,
@@ -406,7 +409,7 @@ pub fn train_with_datasets(
             let _active = ActiveRun::enter();
             let mut plan = plans[p].clone();
             // Its bars would fight the pool's; the pool's names the collection.
-            let r = collect_dataset(registry, &mut plan, false);
+            let r = collect_dataset(registry, &mut plan, false, &opts.cancel);
             if r.is_ok() {
                 let _ = collected[p].set(plan);
             }
@@ -441,11 +444,18 @@ pub fn train_with_datasets(
     bar.finish_and_clear();
     let mut summary = TrainSummary::default();
     let mut first_error = None;
-    for (slot, task) in slots.into_iter().zip(&s.tasks) {
+    for ((slot, task), work) in slots.into_iter().zip(&s.tasks).zip(&s.work) {
         let run = match slot {
             Slot::Done(Done::Run(r)) => Slot::Done(r),
             Slot::Done(Done::Collect(r)) => {
-                if let Err(e) = r {
+                if let (Err(e), Work::Collect { plan }) = (r, work) {
+                    // An interruption is what the pool returns then; the failure is not lost.
+                    if opts.cancel.is_cancelled() && !matches!(e, PipelineError::Cancelled) {
+                        let out = plans[*plan].dataset_from.as_ref().map(|d| d.out.clone());
+                        summary
+                            .warnings
+                            .push((out.unwrap_or_default(), format!("{task} failed: {e}")));
+                    }
                     first_error.get_or_insert(e);
                 }
                 continue;

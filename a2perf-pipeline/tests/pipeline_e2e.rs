@@ -73,6 +73,7 @@ fn train_infer_generalize_collect_report() {
             cost: CostRule::ProRata,
             one_sigma: true,
             show_progress: false,
+            cancel: Default::default(),
         },
     )
     .unwrap();

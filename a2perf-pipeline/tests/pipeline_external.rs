@@ -444,6 +444,7 @@ fn collect_reads_external_checkpoints_through_the_source() {
             cost: CostRule::Measured,
             one_sigma: true,
             show_progress: false,
+            cancel: Default::default(),
         },
     )
     .unwrap();

@@ -392,6 +392,7 @@ fn collect(
         cost,
         one_sigma,
         show_progress: false,
+        cancel: Default::default(),
     };
     let mut source = LoaderPolicies::new(loader, registry());
     let summary = guard("collect", || {
