@@ -75,27 +75,30 @@ fn docs_results_merge_regenerates_the_committed_report_and_page() {
 
 #[test]
 fn docs_paper_tables_render_from_the_committed_report() {
-    let root = docs().join("paper");
-    let text = read(&root.join("report.json"));
-    let report: Report = serde_json::from_slice(&text).unwrap();
-    assert!(!report.paper.is_empty() && !report.findings.is_empty());
-    assert_same(
-        "docs/paper/report.json (read and written again)",
-        &text,
-        &serde_json::to_vec_pretty(&report).unwrap(),
-    );
-    let outputs = [
-        ("report.md", render::markdown(&report)),
-        ("report.tex", render::latex(&report)),
-        ("metrics.csv", render::csv(&report)),
-        ("scores.csv", render::scores_csv(&report)),
-        ("paper_comparison.csv", render::paper_csv(&report)),
-    ];
-    for (name, now) in outputs {
+    // The report of record (`suite.ron`) and the long suite's, committed beside it.
+    for dir in ["paper", "paper/long"] {
+        let root = docs().join(dir);
+        let text = read(&root.join("report.json"));
+        let report: Report = serde_json::from_slice(&text).unwrap();
+        assert!(!report.paper.is_empty() && !report.findings.is_empty());
         assert_same(
-            &format!("docs/paper/{name}"),
-            &read(&root.join(name)),
-            now.as_bytes(),
+            &format!("docs/{dir}/report.json (read and written again)"),
+            &text,
+            &serde_json::to_vec_pretty(&report).unwrap(),
         );
+        let outputs = [
+            ("report.md", render::markdown(&report)),
+            ("report.tex", render::latex(&report)),
+            ("metrics.csv", render::csv(&report)),
+            ("scores.csv", render::scores_csv(&report)),
+            ("paper_comparison.csv", render::paper_csv(&report)),
+        ];
+        for (name, now) in outputs {
+            assert_same(
+                &format!("docs/{dir}/{name}"),
+                &read(&root.join(name)),
+                now.as_bytes(),
+            );
+        }
     }
 }
