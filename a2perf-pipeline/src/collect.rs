@@ -291,56 +291,7 @@ fn write_dataset(
 ) -> Result<DatasetInfo> {
     let id = dataset_id(task, &run.record.task.env_id, level);
     let dir = out.join(&id);
-    let ours = dir.join(DATASET_INFO_FILE).is_file();
-    if !ours && dir.read_dir().is_ok_and(|mut d| d.next().is_some()) {
-        return Err(PipelineError::Invalid(format!(
-            "{}: exists without `{DATASET_INFO_FILE}`, so it is not a dataset `a2perf collect` \
-             finished; refusing to overwrite it (remove it to collect here)",
-            dir.display()
-        )));
-    }
-    // Written whole into a staging directory, then moved into place: an interrupted collection
-    // leaves no partial dataset behind, and the stage of one is replaced by the next attempt.
-    let stage = out.join(format!(".{id}.partial"));
-    if stage.exists() {
-        std::fs::remove_dir_all(&stage).map_err(io_err(&stage))?;
-    }
-    std::fs::create_dir_all(&stage).map_err(io_err(&stage))?;
-    let info = match fill_dataset(
-        registry, source, run, task, level, pool, &stage, &dir, opts, mu_sigma,
-    ) {
-        Ok(info) => info,
-        Err(e) => {
-            let _ = std::fs::remove_dir_all(&stage);
-            return Err(e);
-        }
-    };
-    if ours {
-        // Ours, from an earlier collect: replaced whole so no stale episode survives.
-        std::fs::remove_dir_all(&dir).map_err(io_err(&dir))?;
-    } else if dir.is_dir() {
-        std::fs::remove_dir(&dir).map_err(io_err(&dir))?;
-    }
-    std::fs::rename(&stage, &dir).map_err(io_err(&dir))?;
-    Ok(info)
-}
-
-/// Rolls out the episodes of [`write_dataset`] and writes their files into `stage`; the
-/// dataset's recorded path is `dir`, where it is moved once complete.
-#[allow(clippy::too_many_arguments)]
-fn fill_dataset(
-    registry: &Registry,
-    source: &mut dyn PolicySource,
-    run: &LoadedRun,
-    task: &str,
-    level: Level,
-    pool: &[(&LoadedRun, &CheckpointEval)],
-    stage: &Path,
-    dir: &Path,
-    opts: &CollectOptions,
-    mu_sigma: [f64; 2],
-) -> Result<DatasetInfo> {
-    let id = dataset_id(task, &run.record.task.env_id, level);
+    let stage = Stage::new(out, &id, &dir)?;
     let mut env = run.make_env(registry)?;
     let spec = env.spec().clone();
     let mut rng = RngStream::new(0, &format!("collect/{task}/{}", level.name()));
@@ -389,7 +340,7 @@ fn fill_dataset(
             truncations: ep.transitions.iter().map(|t| t.truncated).collect(),
             seed,
         };
-        let data_dir = stage.join("data");
+        let data_dir = stage.path.join("data");
         minari::write_episode(
             &data_dir,
             e,
@@ -416,7 +367,7 @@ fn fill_dataset(
     used.dedup();
     let info = DatasetInfo {
         dataset_id: id,
-        path: dir.to_path_buf(),
+        path: dir.clone(),
         task: task.into(),
         env_id: run.record.task.env_id.clone(),
         env_params: run.record.task.env_params.clone(),
@@ -429,7 +380,7 @@ fn fill_dataset(
         cost_rule: opts.cost,
         level_mu_sigma: mu_sigma,
     };
-    let samples_file = stage.join("samples.json");
+    let samples_file = stage.path.join("samples.json");
     Dataset {
         env_id: Some(spec.id.clone()),
         samples,
@@ -442,14 +393,14 @@ fn fill_dataset(
             reason: other.to_string(),
         },
     })?;
-    write_json_atomic(&stage.join("episodes.json"), &episodes)?;
-    write_json_atomic(&stage.join(DATASET_INFO_FILE), &info)?;
+    write_json_atomic(&stage.path.join("episodes.json"), &episodes)?;
+    write_json_atomic(&stage.path.join(DATASET_INFO_FILE), &info)?;
     let mut extra = serde_json::Map::new();
     extra.insert(
         "a2perf".into(),
         serde_json::to_value(&info).map_err(|e| PipelineError::Invalid(e.to_string()))?,
     );
-    let data_dir = stage.join("data");
+    let data_dir = stage.path.join("data");
     minari::write_metadata(
         &data_dir,
         &info.dataset_id,
@@ -461,5 +412,62 @@ fn fill_dataset(
         extra,
     )
     .map_err(io_err(&data_dir))?;
+    stage.commit()?;
     Ok(info)
+}
+
+/// A dataset being written: its files go into the staging directory `OUT/.<id>.partial`, which
+/// [`commit`](Stage::commit) moves to the dataset's directory whole, replacing an earlier
+/// dataset of `a2perf collect`. Dropped before that (an error, a cancel), the stage is removed.
+struct Stage {
+    path: PathBuf,
+    dir: PathBuf,
+    /// Whether `dir` holds a finished dataset of ours, replaced on commit.
+    replaces: bool,
+}
+
+impl Stage {
+    /// A fresh stage for the dataset `id` under `out`, whose directory is `dir`. A non-empty
+    /// `dir` that is not a finished dataset of ours is refused, before any episode is rolled out.
+    fn new(out: &Path, id: &str, dir: &Path) -> Result<Self> {
+        let replaces = dir.join(DATASET_INFO_FILE).is_file();
+        if !replaces && dir.read_dir().is_ok_and(|mut d| d.next().is_some()) {
+            return Err(PipelineError::Invalid(format!(
+                "{}: exists without `{DATASET_INFO_FILE}`, so it is not a dataset `a2perf \
+                 collect` finished; refusing to overwrite it (remove it to collect here)",
+                dir.display()
+            )));
+        }
+        // A stage left by a killed attempt is ours by its name: replaced, never trusted.
+        let path = out.join(format!(".{id}.partial"));
+        if path.exists() {
+            std::fs::remove_dir_all(&path).map_err(io_err(&path))?;
+        }
+        std::fs::create_dir_all(&path).map_err(io_err(&path))?;
+        Ok(Self {
+            path,
+            dir: dir.to_path_buf(),
+            replaces,
+        })
+    }
+
+    /// Moves the finished dataset into place, so no stale episode of an earlier one survives.
+    fn commit(self) -> Result<()> {
+        let dir = &self.dir;
+        if self.replaces {
+            std::fs::remove_dir_all(dir).map_err(io_err(dir))?;
+        } else if dir.is_dir() {
+            // Empty (checked in `new`).
+            std::fs::remove_dir(dir).map_err(io_err(dir))?;
+        }
+        std::fs::rename(&self.path, dir).map_err(io_err(dir))
+    }
+}
+
+impl Drop for Stage {
+    fn drop(&mut self) {
+        // Nothing is left after a commit; after a failure this is best effort (the next attempt
+        // replaces a stage it finds).
+        let _ = std::fs::remove_dir_all(&self.path);
+    }
 }

@@ -451,10 +451,11 @@ pub fn train_with_datasets(
                 if let (Err(e), Work::Collect { plan }) = (r, work) {
                     // An interruption is what the pool returns then; the failure is not lost.
                     if opts.cancel.is_cancelled() && !matches!(e, PipelineError::Cancelled) {
-                        let out = plans[*plan].dataset_from.as_ref().map(|d| d.out.clone());
-                        summary
-                            .warnings
-                            .push((out.unwrap_or_default(), format!("{task} failed: {e}")));
+                        let out = plans[*plan]
+                            .dataset_from
+                            .as_ref()
+                            .map_or_else(PathBuf::new, |d| d.out.clone());
+                        summary.warnings.push((out, format!("{task} failed: {e}")));
                     }
                     first_error.get_or_insert(e);
                 }

@@ -6,13 +6,7 @@ use a2perf_pipeline::{InferOptions, TrainOptions, report::ReportOptions};
 
 fn trained() -> (tempfile::TempDir, std::path::PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
-    let plan = common::plan(tmp.path(), "exp", vec![0]);
-    a2perf_pipeline::train(
-        &common::registry(),
-        &a2perf_pipeline::grid(std::slice::from_ref(&plan), None),
-        &TrainOptions::default(),
-    )
-    .unwrap();
+    let plan = common::trained_plan(&common::registry(), tmp.path(), "exp", vec![0]);
     (tmp, plan.run_dir(0))
 }
 
@@ -185,13 +179,7 @@ fn an_interrupted_collection_leaves_no_partial_dataset_and_resumes_exactly() {
     use a2perf_pipeline::collect::{CollectOptions, checkpoints, collect, collect_with};
     let tmp = tempfile::tempdir().unwrap();
     let reg = common::registry();
-    let plan = common::plan(tmp.path(), "exp", vec![0, 1]);
-    a2perf_pipeline::train(
-        &reg,
-        &a2perf_pipeline::grid(std::slice::from_ref(&plan), None),
-        &TrainOptions::default(),
-    )
-    .unwrap();
+    let plan = common::trained_plan(&reg, tmp.path(), "exp", vec![0, 1]);
     let runs = [plan.run_dir(0), plan.run_dir(1)];
     let opts = CollectOptions {
         eval_episodes: 2,

@@ -10,7 +10,7 @@ mod common;
 use std::path::PathBuf;
 use std::process::Command;
 
-use a2perf_pipeline::{TrainOptions, collect::CollectOptions};
+use a2perf_pipeline::collect::CollectOptions;
 
 fn has_minari(python: &PathBuf) -> bool {
     Command::new(python)
@@ -76,13 +76,7 @@ fn collected_datasets_load_with_minari() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let reg = common::registry();
-    let plan = common::plan(tmp.path(), "exp", vec![0, 1]);
-    a2perf_pipeline::train(
-        &reg,
-        &a2perf_pipeline::grid(std::slice::from_ref(&plan), None),
-        &TrainOptions::default(),
-    )
-    .unwrap();
+    let plan = common::trained_plan(&reg, tmp.path(), "exp", vec![0, 1]);
     let out = tmp.path().join("datasets");
     let runs = [plan.run_dir(0), plan.run_dir(1)];
     let summary = a2perf_pipeline::collect::collect(

@@ -80,6 +80,18 @@ pub fn dataset_suite(dir: &Path, entries: &[&str]) -> std::path::PathBuf {
     )
 }
 
+/// [`plan`], trained to the end with the default options.
+pub fn trained_plan(reg: &Registry, out: &Path, name: &str, seeds: Vec<u64>) -> ExperimentPlan {
+    let plan = plan(out, name, seeds);
+    a2perf_pipeline::train(
+        reg,
+        &a2perf_pipeline::grid(std::slice::from_ref(&plan), None),
+        &a2perf_pipeline::TrainOptions::default(),
+    )
+    .unwrap();
+    plan
+}
+
 /// A small plan on the corridor.
 pub fn plan(out: &Path, name: &str, seeds: Vec<u64>) -> ExperimentPlan {
     ExperimentPlan::new(
