@@ -43,7 +43,7 @@ proptest! {
         gamma in 0.5f64..20.0,
     ) {
         let pos: Vec<[f64; 2]> = objs.iter().map(|&(x, y)| [x, y]).collect();
-        let mut wa = WaNets::default();
+        let mut wa = WaNets::<f64>::default();
         for (pins, w) in &nets {
             let pins = pins.iter().map(|&(o, dx, dy)| {
                 if o < pos.len() {
@@ -77,7 +77,7 @@ proptest! {
         objs in prop::collection::vec((2.0f64..62.0, 2.0f64..30.0, 0.2f64..9.0, 0.2f64..9.0), 1..5),
         fixed in (0.0f64..40.0, 0.0f64..20.0, 1.0f64..20.0, 1.0f64..10.0),
     ) {
-        let mut es = Electrostatics::new(64.0, 32.0, 32, 16);
+        let mut es = Electrostatics::<f64>::new(64.0, 32.0, 32, 16);
         let (bx, by) = es.bin_size();
         let (fx, fy, fw, fh) = fixed;
         es.add_fixed(fx, fy, fx + fw, fy + fh);
@@ -113,6 +113,72 @@ proptest! {
                 );
             }
         }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    /// The placer's kernels run in `f32`: they agree with the `f64` ones (checked against
+    /// finite differences above) to `f32` precision, and the density's gradient-only
+    /// evaluation gives the full one's gradient and statistics bit for bit.
+    #[test]
+    fn the_f32_kernels_agree_with_the_f64_ones(
+        objs in prop::collection::vec((2.0f64..62.0, 2.0f64..30.0, 0.2f64..9.0, 0.2f64..9.0), 1..8),
+        nets in prop::collection::vec(prop::collection::vec(0usize..10, 2..7), 1..8),
+        gamma in 0.5f64..20.0,
+    ) {
+        let pos: Vec<[f64; 2]> = objs.iter().map(|&(x, y, _, _)| [x, y]).collect();
+        let n = pos.len();
+        let (mut w64, mut w32) = (WaNets::<f64>::default(), WaNets::<f32>::default());
+        for pins in &nets {
+            let pins: Vec<Pin> = pins.iter().map(|&o| if o < n {
+                Pin { obj: o as u32, dx: 0.25, dy: -0.5 }
+            } else {
+                Pin { obj: FIXED, dx: 6.0 * o as f64, dy: 3.0 * o as f64 }
+            }).collect();
+            w64.push_net(pins.iter().copied(), 1.5, true);
+            w32.push_net(pins.iter().copied(), 1.5, true);
+        }
+        let (mut g64, mut g32) = (vec![[0.0; 2]; n], vec![[0.0; 2]; n]);
+        let (s64, s32) = (w64.evaluate(&pos, gamma, &mut g64), w32.evaluate(&pos, gamma, &mut g32));
+        prop_assert!((s64.wa - s32.wa).abs() <= 1e-5 * (1.0 + s64.wa.abs()), "{} {}", s64.wa, s32.wa);
+        prop_assert!((s64.hpwl - s32.hpwl).abs() <= 1e-5 * (1.0 + s64.hpwl.abs()));
+        let scale = 1.0 + g64.iter().flatten().fold(0.0f64, |m, g| m.max(g.abs()));
+        for (a, b) in g64.iter().flatten().zip(g32.iter().flatten()) {
+            prop_assert!((a - b).abs() <= 1e-4 * scale, "WA gradient {a} against {b}");
+        }
+
+        let (mut e64, mut e32) = (Electrostatics::<f64>::new(64.0, 32.0, 32, 16), Electrostatics::<f32>::new(64.0, 32.0, 32, 16));
+        for e in [&mut e64 as &mut dyn FixedSink, &mut e32] {
+            e.fixed(10.0, 4.0, 22.0, 12.0);
+        }
+        let charges: Vec<Charge> = objs.iter().map(|&(_, _, w, h)| e64.movable_charge(w, h)).collect();
+        let (mut d64, mut d32, mut d32g) = (vec![[0.0; 2]; n], vec![[0.0; 2]; n], vec![[0.0; 2]; n]);
+        let s64 = e64.evaluate(&pos, &charges, 1.0, &mut d64);
+        let s32 = e32.evaluate(&pos, &charges, 1.0, &mut d32);
+        let s32g = e32.evaluate_gradient(&pos, &charges, 1.0, &mut d32g);
+        prop_assert_eq!(&d32, &d32g);
+        prop_assert_eq!((s32.overflow_area, s32.max_density), (s32g.overflow_area, s32g.max_density));
+        prop_assert!(s32g.energy.is_nan());
+        prop_assert!((s64.energy - s32.energy).abs() <= 1e-4 * (1.0 + s64.energy.abs()));
+        prop_assert!((s64.overflow_area - s32.overflow_area).abs() <= 1e-4 * (1.0 + s64.overflow_area));
+        let scale = 1.0 + d64.iter().flatten().fold(0.0f64, |m, g| m.max(g.abs()));
+        for (a, b) in d64.iter().flatten().zip(d32.iter().flatten()) {
+            prop_assert!((a - b).abs() <= 1e-4 * scale, "density gradient {a} against {b}");
+        }
+    }
+}
+
+/// A fixed rectangle into either instance of the density.
+trait FixedSink {
+    fn fixed(&mut self, x0: f64, y0: f64, x1: f64, y1: f64);
+}
+
+impl<F: a2perf_circuit::analytical::real::Real> FixedSink for Electrostatics<F> {
+    fn fixed(&mut self, x0: f64, y0: f64, x1: f64, y1: f64) {
+        self.add_fixed(x0, y0, x1, y1);
+        self.finish_fixed(1.0);
     }
 }
 

@@ -17,6 +17,10 @@
 //! run may differ between CPU kinds (all x86-64 CPUs with AVX and FMA take the same code), never
 //! between runs or thread counts.
 //!
+//! The maps, the transforms and the potential are of the kernels' float type `F` ([`Real`]:
+//! `f32` in the placer, DREAMPlace's default `dtype`; `f64` where the tests check gradients);
+//! the geometry (bin shares and their slopes), the gradient's sums and the statistics are `f64`.
+//!
 //! As DREAMPlace, a movable object narrower than `√2` bins is stretched to `√2` bins with its
 //! charge scaled down to keep its area, so that a small cell always feels the field of more
 //! than one bin; fixed objects deposit their exact footprint times the target density.
@@ -26,8 +30,10 @@ use std::sync::Arc;
 use rustdct::rustfft::num_complex::Complex;
 use rustdct::rustfft::{Fft, FftPlanner};
 
+use super::real::Real;
+
 /// Bins, potential solver and buffers of the density term (reused from run to run).
-pub struct Electrostatics {
+pub struct Electrostatics<F: Real = f64> {
     nx: usize,
     ny: usize,
     bx: f64,
@@ -35,34 +41,39 @@ pub struct Electrostatics {
     width: f64,
     height: f64,
     /// `1/λ_uv` times the normalisation of the transforms, transposed layout `[u·ny + v]`.
-    inv_lambda: Vec<f64>,
+    inv_lambda: Vec<F>,
     /// The 1-D transforms along x (rows) and y (columns).
-    tx: PairDct,
-    ty: PairDct,
+    tx: PairDct<F>,
+    ty: PairDct<F>,
     /// Pairs of rows (or columns) packed as complex numbers, and the FFTs' scratch.
-    packed: Vec<Complex<f64>>,
-    fft_scratch: Vec<Complex<f64>>,
+    packed: Vec<Complex<F>>,
+    fft_scratch: Vec<Complex<F>>,
     /// Charge of the fixed objects (area per bin times the target density), `[iy·nx + ix]`.
-    fixed: Vec<f64>,
+    fixed: Vec<F>,
     /// Total charge of the current evaluation.
-    map: Vec<f64>,
+    map: Vec<F>,
     /// Potential of the current evaluation.
-    psi: Vec<f64>,
+    psi: Vec<F>,
     /// The map after the pass along x, `[u·(ny + ny mod 2) + iy]` (rows padded to an even
     /// length, one zero row past the last), so that every row and column has a partner.
-    transposed: Vec<f64>,
+    transposed: Vec<F>,
     /// The partner of the last row or column when their number is odd.
-    zeros: Vec<f64>,
+    zeros: Vec<F>,
     /// Every movable object's smoothed shares of the bins in x and in y (see
     /// [`smooth_weights`]), computed once per evaluation for the deposit and the gradient.
-    wx: Vec<f64>,
-    wy: Vec<f64>,
+    wx: Vec<F>,
+    wy: Vec<F>,
     foot: Vec<Footprint>,
     dx: Vec<f64>,
     dy: Vec<f64>,
+    /// Per row of bins: whether it holds charge (its transform along x is not zero), and
+    /// whether its potential is needed; the pairs of rows whose transforms along x run.
+    rows_in: Vec<bool>,
+    rows_out: Vec<bool>,
+    pairs: Vec<usize>,
 }
 
-impl std::fmt::Debug for Electrostatics {
+impl<F: Real> std::fmt::Debug for Electrostatics<F> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Electrostatics")
             .field("nx", &self.nx)
@@ -96,26 +107,43 @@ pub struct DensityStats {
     pub max_density: f64,
 }
 
-/// `(Σ qψ, Σ max(q − cap, 0), max q)` over the bins, each in four lanes so that the pass
+/// `(Σ max(q − cap, 0), max q)` over the bins, each in four lanes so that the pass
 /// vectorizes (and gives the same bits on every build).
 #[inline(always)]
-fn bin_sums(map: &[f64], psi: &[f64], cap: f64) -> ([f64; 4], [f64; 4], [f64; 4]) {
-    let (mut dot, mut over, mut top) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+fn bin_sums<F: Real>(map: &[F], cap: f64) -> ([f64; 4], [f64; 4]) {
+    let (mut over, mut top) = ([0.0f64; 4], [0.0f64; 4]);
+    let qs = map.chunks_exact(4);
+    let q_rest = qs.remainder();
+    for q in qs {
+        for l in 0..4 {
+            let q = q[l].widen();
+            over[l] += if q > cap { q - cap } else { 0.0 };
+            top[l] = if q > top[l] { q } else { top[l] };
+        }
+    }
+    for (l, &q) in q_rest.iter().enumerate() {
+        let q = q.widen();
+        over[l] += if q > cap { q - cap } else { 0.0 };
+        top[l] = if q > top[l] { q } else { top[l] };
+    }
+    (over, top)
+}
+
+/// `Σ qψ` over the bins in four lanes.
+#[inline(always)]
+fn bin_dot<F: Real>(map: &[F], psi: &[F]) -> [f64; 4] {
+    let mut dot = [0.0f64; 4];
     let (qs, ps) = (map.chunks_exact(4), psi.chunks_exact(4));
     let (q_rest, p_rest) = (qs.remainder(), ps.remainder());
     for (q, p) in qs.zip(ps) {
         for l in 0..4 {
-            dot[l] += q[l] * p[l];
-            over[l] += if q[l] > cap { q[l] - cap } else { 0.0 };
-            top[l] = if q[l] > top[l] { q[l] } else { top[l] };
+            dot[l] += q[l].widen() * p[l].widen();
         }
     }
     for (l, (&q, &p)) in q_rest.iter().zip(p_rest).enumerate() {
-        dot[l] += q * p;
-        over[l] += if q > cap { q - cap } else { 0.0 };
-        top[l] = if q > top[l] { q } else { top[l] };
+        dot[l] += q.widen() * p.widen();
     }
-    (dot, over, top)
+    dot
 }
 
 /// Where a movable object's shares lie: columns `c0..c0 + cw` (at `ox` in the x shares), rows
@@ -150,10 +178,10 @@ fn overlap(a0: f64, a1: f64, i: usize, b: f64) -> f64 {
     (a1.min(r) - a0.max(l)).max(0.0)
 }
 
-impl Electrostatics {
+impl<F: Real> Electrostatics<F> {
     /// Bins `nx × ny` over a `width × height` canvas.
     pub fn new(width: f64, height: f64, nx: usize, ny: usize) -> Self {
-        let mut planner = FftPlanner::new();
+        let mut planner = FftPlanner::<F>::new();
         let (tx, ty) = (
             PairDct::new(&mut planner, nx),
             PairDct::new(&mut planner, ny),
@@ -164,13 +192,13 @@ impl Electrostatics {
         // DCT-III(DCT-II(x)) = (n/2)·x in each dimension; the bin area turns charge into density.
         let norm = 4.0 / (nx * ny) as f64 / (bx * by);
         // A zero row past the last: the partner of the last column when `nx` is odd.
-        let mut inv_lambda = vec![0.0; (nx + 1) * ny];
+        let mut inv_lambda = vec![F::zero(); (nx + 1) * ny];
         let (kx, ky) = (std::f64::consts::PI / width, std::f64::consts::PI / height);
         for u in 0..nx {
             for v in 0..ny {
                 let l = (kx * u as f64).powi(2) + (ky * v as f64).powi(2);
                 if l > 0.0 {
-                    inv_lambda[u * ny + v] = norm / l;
+                    inv_lambda[u * ny + v] = F::of(norm / l);
                 }
             }
         }
@@ -186,16 +214,19 @@ impl Electrostatics {
             ty,
             packed: vec![Complex::default(); packed_len],
             fft_scratch: vec![Complex::default(); scratch_len],
-            fixed: vec![0.0; nx * ny],
-            map: vec![0.0; nx * ny],
-            psi: vec![0.0; nx * ny],
-            transposed: vec![0.0; (nx + 1) * (ny + ny % 2)],
-            zeros: vec![0.0; nx.max(ny)],
+            fixed: vec![F::zero(); nx * ny],
+            map: vec![F::zero(); nx * ny],
+            psi: vec![F::zero(); nx * ny],
+            transposed: vec![F::zero(); (nx + 1) * (ny + ny % 2)],
+            zeros: vec![F::zero(); nx.max(ny)],
             wx: Vec::new(),
             wy: Vec::new(),
             foot: Vec::new(),
             dx: vec![0.0; nx],
             dy: vec![0.0; ny],
+            rows_in: vec![false; ny],
+            rows_out: vec![false; ny],
+            pairs: Vec::with_capacity(ny.div_ceil(2)),
         }
     }
 
@@ -226,7 +257,7 @@ impl Electrostatics {
 
     /// Clears the fixed charge.
     pub fn clear_fixed(&mut self) {
-        self.fixed.iter_mut().for_each(|v| *v = 0.0);
+        self.fixed.iter_mut().for_each(|v| *v = F::zero());
     }
 
     /// Adds a fixed rectangle `[x0, x1] × [y0, y1]` (call [`Self::finish_fixed`] after the
@@ -246,19 +277,44 @@ impl Electrostatics {
     pub fn finish_fixed(&mut self, target_density: f64) {
         let cap = self.bx * self.by;
         for q in &mut self.fixed {
-            *q = q.min(cap) * target_density;
+            *q = F::of(q.widen().min(cap) * target_density);
         }
     }
 
+    /// Charge map of `pos` (centres) with `charges`, potential, energy and statistics;
+    /// writes `∂E/∂pos` into `grad` (overwritten).
+    pub fn evaluate(
+        &mut self,
+        pos: &[[f64; 2]],
+        charges: &[Charge],
+        target_density: f64,
+        grad: &mut [[f64; 2]],
+    ) -> DensityStats {
+        self.evaluate_with(pos, charges, target_density, grad, true)
+    }
+
+    /// [`Self::evaluate`] without the energy (NaN in the result): the potential is solved
+    /// only in the rows of bins under the movable objects, which is all the gradient reads.
+    /// The gradient and the other statistics are the same, bit for bit.
+    pub fn evaluate_gradient(
+        &mut self,
+        pos: &[[f64; 2]],
+        charges: &[Charge],
+        target_density: f64,
+        grad: &mut [[f64; 2]],
+    ) -> DensityStats {
+        self.evaluate_with(pos, charges, target_density, grad, false)
+    }
+
     vector_builds! {
-        /// Charge map of `pos` (centres) with `charges`, potential, energy and statistics;
-        /// writes `∂E/∂pos` into `grad` (overwritten).
-        pub fn evaluate / evaluate_avx2 / evaluate_avx512 (
+        /// Both of the above: `full` solves the potential in every row and sums the energy.
+        fn evaluate_with / evaluate_avx2 / evaluate_avx512 (
             &mut self,
             pos: &[[f64; 2]],
             charges: &[Charge],
             target_density: f64,
             grad: &mut [[f64; 2]],
+            full: bool,
         ) -> DensityStats = evaluate_generic
     }
 
@@ -269,12 +325,14 @@ impl Electrostatics {
         charges: &[Charge],
         target_density: f64,
         grad: &mut [[f64; 2]],
+        full: bool,
     ) -> DensityStats {
         let (bx, by) = (self.bx, self.by);
         self.map.copy_from_slice(&self.fixed);
         self.wx.clear();
         self.wy.clear();
         self.foot.clear();
+        self.rows_out.iter_mut().for_each(|r| *r = full);
         for (p, c) in pos.iter().zip(charges) {
             let (ox, oy) = (self.wx.len(), self.wy.len());
             let f = smooth_weights(p[0] - c.hw, p[0] + c.hw, bx, self.nx, &mut self.wx).and_then(
@@ -298,20 +356,31 @@ impl Electrostatics {
                 continue;
             };
             let (wx, wy) = (&self.wx[ox..ox + f.cw], &self.wy[oy..oy + f.rw]);
+            self.rows_out[f.r0..f.r0 + f.rw]
+                .iter_mut()
+                .for_each(|r| *r = true);
             for (r, &wy) in (f.r0..f.r0 + f.rw).zip(wy) {
                 let base = r * self.nx + f.c0;
-                let wy = c.ratio * wy;
+                let wy = F::of(c.ratio * wy.widen());
                 for (m, &wx) in self.map[base..base + f.cw].iter_mut().zip(wx) {
                     *m += wy * wx;
                 }
             }
             self.foot.push(f);
         }
+        let zero = F::zero();
+        for (r, row) in self.rows_in.iter_mut().zip(self.map.chunks_exact(self.nx)) {
+            *r = row.iter().any(|&q| q != zero);
+        }
         self.solve();
         let cap = target_density * bx * by;
-        let (dot, over, top) = bin_sums(&self.map, &self.psi, cap);
+        let (over, top) = bin_sums(&self.map, cap);
         let lanes = |v: [f64; 4]| (v[0] + v[1]) + (v[2] + v[3]);
-        let energy = 0.5 * lanes(dot);
+        let energy = if full {
+            0.5 * lanes(bin_dot(&self.map, &self.psi))
+        } else {
+            f64::NAN
+        };
         let overflow_area = lanes(over);
         let max_q = top.into_iter().fold(0.0f64, f64::max);
         for (((p, c), g), k) in pos.iter().zip(charges).zip(grad.iter_mut()).zip(0..) {
@@ -346,10 +415,11 @@ impl Electrostatics {
             let row = &self.psi[base..base + f.cw];
             let (mut sx, mut s) = (0.0, 0.0);
             for ((p, wx), dx) in row.iter().zip(wx).zip(&self.dx[..f.cw]) {
+                let p = p.widen();
                 sx += dx * p;
-                s += wx * p;
+                s += wx.widen() * p;
             }
-            g[0] += wy * sx;
+            g[0] += wy.widen() * sx;
             g[1] += dy * s;
         }
         [ratio * g[0], ratio * g[1]]
@@ -357,7 +427,10 @@ impl Electrostatics {
 
     /// `psi = G · map`: DCT-II along x then y, the division by the eigenvalues, DCT-III along
     /// y then x. Each pass transforms the rows two at a time, packed as one complex FFT, and
-    /// the passes along x write (read) the transposed layout directly.
+    /// the passes along x write (read) the transposed layout directly. Only the pairs of rows
+    /// with charge (`rows_in`) are transformed along x (the others' transforms are zero), and
+    /// only the pairs whose potential is needed (`rows_out`) come back; every pair that runs
+    /// is computed as it would be alone.
     #[inline(always)]
     fn solve(&mut self) {
         let (nx, ny) = (self.nx, self.ny);
@@ -377,17 +450,36 @@ impl Electrostatics {
                 &zeros[..nx]
             }
         };
+        let pairs = &mut self.pairs;
+        let select = |pairs: &mut Vec<usize>, rows: &[bool]| {
+            pairs.clear();
+            pairs.extend(
+                (0..ny.div_ceil(2)).filter(|&j| rows[2 * j] || rows.get(2 * j + 1) == Some(&true)),
+            );
+        };
         // Rows of the map: DCT-II along x into t[u·ny2 + iy].
-        let px = &mut packed[..ny.div_ceil(2) * nx];
-        for (j, z) in px.chunks_exact_mut(nx).enumerate() {
+        select(pairs, &self.rows_in);
+        let px = &mut packed[..pairs.len() * nx];
+        for (&j, z) in pairs.iter().zip(px.chunks_exact_mut(nx)) {
             self.tx.pack_forward(z, row(2 * j), row(2 * j + 1));
         }
-        self.tx.forward.process_with_scratch(px, scratch);
-        for (j, z) in px.chunks_exact(nx).enumerate() {
-            self.tx.unpack_forward(z, |k, a, b| {
-                t[k * ny2 + 2 * j] = a;
-                t[k * ny2 + 2 * j + 1] = b;
-            });
+        if !px.is_empty() {
+            self.tx.forward.process_with_scratch(px, scratch);
+        }
+        let mut next = pairs.iter().zip(px.chunks_exact(nx)).peekable();
+        for j in 0..ny.div_ceil(2) {
+            match next.next_if(|(p, _)| **p == j) {
+                Some((_, z)) => self.tx.unpack_forward(z, |k, a, b| {
+                    t[k * ny2 + 2 * j] = a;
+                    t[k * ny2 + 2 * j + 1] = b;
+                }),
+                None => {
+                    for k in 0..nx {
+                        t[k * ny2 + 2 * j] = F::zero();
+                        t[k * ny2 + 2 * j + 1] = F::zero();
+                    }
+                }
+            }
         }
         // Columns: DCT-II along y, times 1/λ, DCT-III along y, in place in t.
         let py = &mut packed[..nx.div_ceil(2) * ny];
@@ -413,14 +505,17 @@ impl Electrostatics {
             };
             self.ty.unpack_inverse(z, &mut ta[..ny], tb);
         }
-        // DCT-III along x, reading t transposed, into the rows of psi.
-        let px = &mut packed[..ny.div_ceil(2) * nx];
-        for (j, z) in px.chunks_exact_mut(nx).enumerate() {
+        // DCT-III along x, reading t transposed, into the rows of psi that are needed.
+        select(pairs, &self.rows_out);
+        let px = &mut packed[..pairs.len() * nx];
+        for (&j, z) in pairs.iter().zip(px.chunks_exact_mut(nx)) {
             self.tx
                 .pack_inverse(z, |k| (t[k * ny2 + 2 * j], t[k * ny2 + 2 * j + 1]));
         }
-        self.tx.inverse.process_with_scratch(px, scratch);
-        for (j, z) in px.chunks_exact(nx).enumerate() {
+        if !px.is_empty() {
+            self.tx.inverse.process_with_scratch(px, scratch);
+        }
+        for (&j, z) in pairs.iter().zip(px.chunks_exact(nx)) {
             let (a, b) = (2 * j * nx, (2 * j + 1) * nx);
             if b < psi.len() {
                 let (pa, pb) = psi[a..b + nx].split_at_mut(nx);
@@ -432,12 +527,12 @@ impl Electrostatics {
     }
 
     /// The potential of the last evaluation, `[iy·nx + ix]`.
-    pub fn potential(&self) -> &[f64] {
+    pub fn potential(&self) -> &[F] {
         &self.psi
     }
 
     /// The charge map of the last evaluation, `[iy·nx + ix]`.
-    pub fn charge_map(&self) -> &[f64] {
+    pub fn charge_map(&self) -> &[F] {
         &self.map
     }
 }
@@ -467,19 +562,19 @@ fn tent_integral2(d: f64, b: f64) -> f64 {
 /// interval, which is a C¹ function of the interval's position, so the energy's gradient is
 /// continuous. Appends the bins' shares to `out` and returns `(first bin, len)`.
 #[inline(always)]
-fn smooth_weights(
+fn smooth_weights<F: Real>(
     a0: f64,
     a1: f64,
     b: f64,
     n: usize,
-    out: &mut Vec<f64>,
+    out: &mut Vec<F>,
 ) -> Option<(usize, usize)> {
     let h = b / 2.0;
     let (lo, hi) = span(a0 - h, a1 + h, b, n)?;
     let half_inv = 0.5 / b;
     out.extend((lo..=hi).map(|i| {
         let c = (i as f64 + 0.5) * b;
-        (tent_integral2(a1 - c, b) - tent_integral2(a0 - c, b)) * half_inv
+        F::of((tent_integral2(a1 - c, b) - tent_integral2(a0 - c, b)) * half_inv)
     }));
     Some((lo, hi - lo + 1))
 }
@@ -495,8 +590,8 @@ fn smooth_slopes(a0: f64, a1: f64, b: f64, lo: usize, len: usize, out: &mut [f64
 }
 
 /// Adds `scale` × the overlap area of `[x0, x1] × [y0, y1]` to every bin of `map`.
-fn deposit(
-    map: &mut [f64],
+fn deposit<F: Real>(
+    map: &mut [F],
     (nx, ny): (usize, usize),
     (bx, by): (f64, f64),
     [x0, y0, x1, y1]: [f64; 4],
@@ -509,7 +604,7 @@ fn deposit(
         let oy = scale * overlap(y0, y1, r, by);
         let base = r * nx;
         for c in c0..=c1 {
-            map[base + c] += oy * overlap(x0, x1, c, bx);
+            map[base + c] += F::of(oy * overlap(x0, x1, c, bx));
         }
     }
 }
@@ -518,24 +613,24 @@ fn deposit(
 /// DCT-III, `x_n = X_0/2 + Σ_{k≥1} X_k cos(πk(2n+1)/2N)`) of length `N` by one complex FFT
 /// of length `N` (Makhoul's reordering; the two real sequences as the real and imaginary
 /// parts). Glue around rustfft: the transforms themselves are rustfft's.
-struct PairDct {
+struct PairDct<F: Real> {
     n: usize,
-    forward: Arc<dyn Fft<f64>>,
-    inverse: Arc<dyn Fft<f64>>,
+    forward: Arc<dyn Fft<F>>,
+    inverse: Arc<dyn Fft<F>>,
     /// `cos(πk/2N)/2`, `sin(πk/2N)/2`.
-    half_cos: Vec<f64>,
-    half_sin: Vec<f64>,
+    half_cos: Vec<F>,
+    half_sin: Vec<F>,
 }
 
-impl PairDct {
-    fn new(planner: &mut FftPlanner<f64>, n: usize) -> Self {
+impl<F: Real> PairDct<F> {
+    fn new(planner: &mut FftPlanner<F>, n: usize) -> Self {
         let angle = |k: usize| std::f64::consts::PI * k as f64 / (2 * n) as f64;
         Self {
             n,
             forward: planner.plan_fft_forward(n),
             inverse: planner.plan_fft_inverse(n),
-            half_cos: (0..n).map(|k| angle(k).cos() / 2.0).collect(),
-            half_sin: (0..n).map(|k| angle(k).sin() / 2.0).collect(),
+            half_cos: (0..n).map(|k| F::of(angle(k).cos() / 2.0)).collect(),
+            half_sin: (0..n).map(|k| F::of(angle(k).sin() / 2.0)).collect(),
         }
     }
 
@@ -548,7 +643,7 @@ impl PairDct {
     /// `z` = the pair `(a, b)` in Makhoul's order (even samples first, then the odd ones
     /// backwards), ready for the forward FFT.
     #[inline(always)]
-    fn pack_forward(&self, z: &mut [Complex<f64>], a: &[f64], b: &[f64]) {
+    fn pack_forward(&self, z: &mut [Complex<F>], a: &[F], b: &[F]) {
         let n = self.n;
         let (lo, hi) = z[..n].split_at_mut(n.div_ceil(2));
         for (h, zh) in lo.iter_mut().enumerate() {
@@ -561,7 +656,7 @@ impl PairDct {
 
     /// The two DCT-IIs `(A_k, B_k)` from the forward FFT `z` of a packed pair, to `out`.
     #[inline(always)]
-    fn unpack_forward(&self, z: &[Complex<f64>], mut out: impl FnMut(usize, f64, f64)) {
+    fn unpack_forward(&self, z: &[Complex<F>], mut out: impl FnMut(usize, F, F)) {
         let (a, b) = self.dct2_coefficient(0, z[0], z[0]);
         out(0, a, b);
         for k in 1..self.n {
@@ -572,10 +667,14 @@ impl PairDct {
 
     /// `z` = the packed spectrum whose inverse FFT is the pair of DCT-IIIs of `X(k) = (A_k, B_k)`.
     #[inline(always)]
-    fn pack_inverse(&self, z: &mut [Complex<f64>], x: impl Fn(usize) -> (f64, f64)) {
+    fn pack_inverse(&self, z: &mut [Complex<F>], x: impl Fn(usize) -> (F, F)) {
         let n = self.n;
         for (k, zk) in z.iter_mut().enumerate().take(n) {
-            let xr = if k == 0 { (0.0, 0.0) } else { x(n - k) };
+            let xr = if k == 0 {
+                (F::zero(), F::zero())
+            } else {
+                x(n - k)
+            };
             *zk = self.packed_coefficient(k, x(k), xr);
         }
     }
@@ -583,12 +682,7 @@ impl PairDct {
     /// Coefficient `k` of the packed spectrum from `X_k` and `X_{N−k}` (zero for `k = 0`):
     /// `V = (c + i s)(X_k − i X_{N−k})` for each sequence, then `V_a + i V_b`.
     #[inline(always)]
-    fn packed_coefficient(
-        &self,
-        k: usize,
-        (a, b): (f64, f64),
-        (ar, br): (f64, f64),
-    ) -> Complex<f64> {
+    fn packed_coefficient(&self, k: usize, (a, b): (F, F), (ar, br): (F, F)) -> Complex<F> {
         let (c, s) = (self.half_cos[k], self.half_sin[k]);
         let (va_re, va_im) = (c * a + s * ar, s * a - c * ar);
         let (vb_re, vb_im) = (c * b + s * br, s * b - c * br);
@@ -597,7 +691,7 @@ impl PairDct {
 
     /// The pair's DCT-IIs `(A_k, B_k)` from coefficients `k` and `N − k` of its forward FFT.
     #[inline(always)]
-    fn dct2_coefficient(&self, k: usize, p: Complex<f64>, q: Complex<f64>) -> (f64, f64) {
+    fn dct2_coefficient(&self, k: usize, p: Complex<F>, q: Complex<F>) -> (F, F) {
         let (c, s) = (self.half_cos[k], self.half_sin[k]);
         (
             c * (p.re + q.re) + s * (p.im - q.im),
@@ -609,11 +703,11 @@ impl PairDct {
     /// pair's DCT-IIIs after scaling the DCT-II coefficients by `sa` (a) and `sb` (b).
     /// Coefficients `k` and `N − k` depend on each other only, so they are done together.
     #[inline(always)]
-    fn spectral_filter(&self, z: &mut [Complex<f64>], sa: &[f64], sb: &[f64]) {
+    fn spectral_filter(&self, z: &mut [Complex<F>], sa: &[F], sb: &[F]) {
         let n = self.n;
-        let scaled = |k: usize, (a, b): (f64, f64)| (a * sa[k], b * sb[k]);
+        let scaled = |k: usize, (a, b): (F, F)| (a * sa[k], b * sb[k]);
         let x = scaled(0, self.dct2_coefficient(0, z[0], z[0]));
-        z[0] = self.packed_coefficient(0, x, (0.0, 0.0));
+        z[0] = self.packed_coefficient(0, x, (F::zero(), F::zero()));
         for k in 1..=n / 2 {
             let k2 = n - k;
             let (p, q) = (z[k], z[k2]);
@@ -627,7 +721,7 @@ impl PairDct {
     /// The pair of sequences `(a, b)` from the inverse FFT `z` of a packed spectrum (Makhoul's
     /// order undone); `b` is dropped when `None`.
     #[inline(always)]
-    fn unpack_inverse(&self, z: &[Complex<f64>], a: &mut [f64], b: Option<&mut [f64]>) {
+    fn unpack_inverse(&self, z: &[Complex<F>], a: &mut [F], b: Option<&mut [F]>) {
         let n = self.n;
         let (lo, hi) = z[..n].split_at(n.div_ceil(2));
         for (h, zh) in lo.iter().enumerate() {
@@ -674,7 +768,7 @@ mod tests {
             (63.0, 31.5, 63, 21),
             (60.0, 30.0, 48, 33),
         ] {
-            let mut e = Electrostatics::new(w, h, nx, ny);
+            let mut e = Electrostatics::<f64>::new(w, h, nx, ny);
             let (bx, by) = e.bin_size();
             for iy in 0..ny {
                 for ix in 0..nx {
@@ -703,7 +797,7 @@ mod tests {
     #[test]
     fn the_paired_transforms_equal_rustdcts() {
         let mut planner = DctPlanner::<f64>::new();
-        let mut fft = FftPlanner::new();
+        let mut fft = FftPlanner::<f64>::new();
         for n in [1, 2, 5, 8, 12, 17] {
             let t = PairDct::new(&mut fft, n);
             let a: Vec<f64> = (0..n).map(|i| ((i * 7) % 5) as f64 - 1.5).collect();

@@ -34,7 +34,13 @@
 //! When the divergence test stops it, the result is the iterate of lowest overflow (as
 //! DREAMPlace's roll-back; its finer `check_divergence` heuristic is not reproduced). Left out:
 //! the quadratic density penalty and entropy injection of DREAMPlace's newer releases (both
-//! only for placements stuck at overflow ≥ 0.9), and float32 arithmetic (ours is f64).
+//! only for placements stuck at overflow ≥ 0.9).
+//!
+//! Arithmetic: the wirelength and density kernels compute in `f32`, as DREAMPlace does by
+//! default (`dtype` `float32`; circuit_training does not change it), with every sum the
+//! stopping tests read in `f64`; positions and the optimizer are `f64`. The kernels are
+//! generic ([`real::Real`]), and the tests check their `f64` instances against finite
+//! differences and the `f32` ones against those.
 //!
 //! ```
 //! use a2perf_circuit::{generate, GeneratorConfig, PlacementCost};
@@ -88,6 +94,7 @@ macro_rules! vector_builds {
 }
 
 pub mod density;
+pub mod real;
 pub mod wirelength;
 
 use a2perf_core::RngStream;
@@ -96,6 +103,9 @@ use crate::cost::PlacementCost;
 use crate::netlist::NodeKind;
 use density::{Charge, Electrostatics};
 use wirelength::{FIXED, Pin, WaNets};
+
+/// The kernels' float type: DREAMPlace's default `dtype` (see [`real`]).
+type Kernel = f32;
 
 /// Errors of the analytical placer.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -291,9 +301,9 @@ pub struct AnalyticalScratch {
     size: Vec<[f64; 2]>,
     charge: Vec<Charge>,
     pin_weight: Vec<f64>,
-    nets: WaNets,
+    nets: WaNets<Kernel>,
     net_pins: Vec<Pin>,
-    es: Option<Electrostatics>,
+    es: Option<Electrostatics<Kernel>>,
     pos: Vec<[f64; 2]>,
     g_wl: Vec<[f64; 2]>,
     g_den: Vec<[f64; 2]>,
@@ -690,10 +700,10 @@ struct Metric {
     max_density: f64,
 }
 
-/// The objective `WA + λ·E` with its preconditioned gradient.
+/// The objective `WA + λ·E`: its preconditioned gradient.
 struct Problem<'a> {
-    nets: &'a mut WaNets,
-    es: &'a mut Electrostatics,
+    nets: &'a mut WaNets<Kernel>,
+    es: &'a mut Electrostatics<Kernel>,
     charge: &'a [Charge],
     size: &'a [[f64; 2]],
     area: &'a [f64],
@@ -728,12 +738,16 @@ impl Problem<'_> {
         }
     }
 
-    /// Raw gradients of both terms at `pos` into `g_wl`, `g_den`; records the metric.
-    fn terms(&mut self, pos: &[[f64; 2]]) -> (f64, f64) {
+    /// Raw gradients of both terms at `pos` into `g_wl`, `g_den`; records the metric. (The
+    /// objective's value is not needed: the step sizes come from gradients alone, so the
+    /// density's energy is not summed.)
+    fn terms(&mut self, pos: &[[f64; 2]]) {
         self.evaluations += 1;
         self.g_wl.iter_mut().for_each(|g| *g = [0.0, 0.0]);
         let wl = self.nets.evaluate(pos, self.gamma, self.g_wl);
-        let d = self.es.evaluate(pos, self.charge, self.target, self.g_den);
+        let d = self
+            .es
+            .evaluate_gradient(pos, self.charge, self.target, self.g_den);
         self.last = Metric {
             hpwl: wl.hpwl,
             overflow: if self.movable_area > 0.0 {
@@ -743,12 +757,11 @@ impl Problem<'_> {
             },
             max_density: d.max_density,
         };
-        (wl.wa, d.energy)
     }
 
-    /// Objective and preconditioned gradient at `pos`.
-    fn obj_grad(&mut self, pos: &[[f64; 2]], grad: &mut [[f64; 2]]) -> f64 {
-        let (wl, e) = self.terms(pos);
+    /// The objective's preconditioned gradient at `pos`.
+    fn obj_grad(&mut self, pos: &[[f64; 2]], grad: &mut [[f64; 2]]) {
+        self.terms(pos);
         let lambda = self.lambda;
         for ((((g, gw), gd), pw), a) in grad
             .iter_mut()
@@ -763,7 +776,6 @@ impl Problem<'_> {
                 (gw[1] + lambda * gd[1]) * pre,
             ];
         }
-        wl + lambda * e
     }
 
     /// λ = `weight · |∇WL|₁ / |∇E|₁` at `pos` (DREAMPlace's `initialize_density_weight`).
