@@ -45,8 +45,10 @@ pub struct Electrostatics<F: Real = f64> {
     /// The 1-D transforms along x (rows) and y (columns).
     tx: PairDct<F>,
     ty: PairDct<F>,
-    /// Pairs of rows (or columns) packed as complex numbers, and the FFTs' scratch.
+    /// Pairs of rows packed as complex numbers for the passes along x, pairs of columns for
+    /// the passes along y, and the FFTs' scratch.
     packed: Vec<Complex<F>>,
+    packed_y: Vec<Complex<F>>,
     fft_scratch: Vec<Complex<F>>,
     /// Charge of the fixed objects (area per bin times the target density), `[iy·nx + ix]`.
     fixed: Vec<F>,
@@ -54,9 +56,9 @@ pub struct Electrostatics<F: Real = f64> {
     map: Vec<F>,
     /// Potential of the current evaluation.
     psi: Vec<F>,
-    /// The map after the pass along x, `[u·(ny + ny mod 2) + iy]` (rows padded to an even
-    /// length, one zero row past the last), so that every row and column has a partner.
-    transposed: Vec<F>,
+    /// When `ny` is odd: the transform along x of the zero row past the last (the partner of
+    /// the last row), which the pass back along x reads.
+    pad: Vec<F>,
     /// The partner of the last row or column when their number is odd.
     zeros: Vec<F>,
     /// Every movable object's smoothed shares of the bins in x and in y (see
@@ -187,7 +189,7 @@ impl<F: Real> Electrostatics<F> {
             PairDct::new(&mut planner, ny),
         );
         let scratch_len = tx.scratch_len().max(ty.scratch_len());
-        let packed_len = (ny.div_ceil(2) * nx).max(nx.div_ceil(2) * ny);
+
         let (bx, by) = (width / nx as f64, height / ny as f64);
         // DCT-III(DCT-II(x)) = (n/2)·x in each dimension; the bin area turns charge into density.
         let norm = 4.0 / (nx * ny) as f64 / (bx * by);
@@ -212,12 +214,13 @@ impl<F: Real> Electrostatics<F> {
             inv_lambda,
             tx,
             ty,
-            packed: vec![Complex::default(); packed_len],
+            packed: vec![Complex::default(); ny.div_ceil(2) * nx],
+            packed_y: vec![Complex::default(); nx.div_ceil(2) * ny],
             fft_scratch: vec![Complex::default(); scratch_len],
             fixed: vec![F::zero(); nx * ny],
             map: vec![F::zero(); nx * ny],
             psi: vec![F::zero(); nx * ny],
-            transposed: vec![F::zero(); (nx + 1) * (ny + ny % 2)],
+            pad: vec![F::zero(); nx],
             zeros: vec![F::zero(); nx.max(ny)],
             wx: Vec::new(),
             wy: Vec::new(),
@@ -335,20 +338,24 @@ impl<F: Real> Electrostatics<F> {
         self.rows_out.iter_mut().for_each(|r| *r = full);
         for (p, c) in pos.iter().zip(charges) {
             let (ox, oy) = (self.wx.len(), self.wy.len());
-            let f = smooth_weights(p[0] - c.hw, p[0] + c.hw, bx, self.nx, &mut self.wx).and_then(
-                |(c0, cw)| {
-                    let (r0, rw) =
-                        smooth_weights(p[1] - c.hh, p[1] + c.hh, by, self.ny, &mut self.wy)?;
-                    Some(Footprint {
-                        c0,
-                        cw,
-                        r0,
-                        rw,
-                        ox,
-                        oy,
-                    })
-                },
-            );
+            // Plain control flow, no closure: a closure was compiled out of line, outside the
+            // vector builds.
+            let x = smooth_weights(p[0] - c.hw, p[0] + c.hw, bx, self.nx, &mut self.wx);
+            let y = match x {
+                Some(_) => smooth_weights(p[1] - c.hh, p[1] + c.hh, by, self.ny, &mut self.wy),
+                None => None,
+            };
+            let f = match (x, y) {
+                (Some((c0, cw)), Some((r0, rw))) => Some(Footprint {
+                    c0,
+                    cw,
+                    r0,
+                    rw,
+                    ox,
+                    oy,
+                }),
+                _ => None,
+            };
             let Some(f) = f else {
                 // Outside the canvas: no charge, no gradient.
                 self.wx.truncate(ox);
@@ -426,20 +433,24 @@ impl<F: Real> Electrostatics<F> {
     }
 
     /// `psi = G · map`: DCT-II along x then y, the division by the eigenvalues, DCT-III along
-    /// y then x. Each pass transforms the rows two at a time, packed as one complex FFT, and
-    /// the passes along x write (read) the transposed layout directly. Only the pairs of rows
-    /// with charge (`rows_in`) are transformed along x (the others' transforms are zero), and
-    /// only the pairs whose potential is needed (`rows_out`) come back; every pair that runs
-    /// is computed as it would be alone.
+    /// y then x. Each pass transforms the rows two at a time, packed as one complex FFT. The
+    /// pass along x writes each coefficient straight where the pass along y packs it (column
+    /// `k` of the x transform is the real part of column pair `k/2` if `k` is even, the
+    /// imaginary part if odd; row `iy` sits at Makhoul's position [`makhoul`]), and the pass
+    /// back along x reads them from there. Only the pairs of rows with charge (`rows_in`) are
+    /// transformed along x (the others' transforms are zero), and only the pairs whose
+    /// potential is needed (`rows_out`) come back; every pair that runs is computed as it would
+    /// be alone.
     #[inline(always)]
     fn solve(&mut self) {
         let (nx, ny) = (self.nx, self.ny);
-        let ny2 = ny + ny % 2;
+        let zero = F::zero();
         // Slices, not vectors: a store through a slice cannot move the slice itself, so the
         // loops keep its address in a register.
-        let (map, t, psi) = (&self.map[..], &mut self.transposed[..], &mut self.psi[..]);
-        let (packed, scratch, zeros) = (
+        let (map, psi, pad) = (&self.map[..], &mut self.psi[..], &mut self.pad[..]);
+        let (packed, py, scratch, zeros) = (
             &mut self.packed[..],
+            &mut self.packed_y[..],
             &mut self.fft_scratch[..],
             &self.zeros[..],
         );
@@ -457,7 +468,7 @@ impl<F: Real> Electrostatics<F> {
                 (0..ny.div_ceil(2)).filter(|&j| rows[2 * j] || rows.get(2 * j + 1) == Some(&true)),
             );
         };
-        // Rows of the map: DCT-II along x into t[u·ny2 + iy].
+        // Rows of the map: DCT-II along x, into the y pass's buffer.
         select(pairs, &self.rows_in);
         let px = &mut packed[..pairs.len() * nx];
         for (&j, z) in pairs.iter().zip(px.chunks_exact_mut(nx)) {
@@ -470,23 +481,24 @@ impl<F: Real> Electrostatics<F> {
         for j in 0..ny.div_ceil(2) {
             match next.next_if(|(p, _)| **p == j) {
                 Some((_, z)) => self.tx.unpack_forward(z, |k, a, b| {
-                    t[k * ny2 + 2 * j] = a;
-                    t[k * ny2 + 2 * j + 1] = b;
+                    put_half(py, pad, ny, k, 2 * j, a);
+                    put_half(py, pad, ny, k, 2 * j + 1, b);
                 }),
                 None => {
                     for k in 0..nx {
-                        t[k * ny2 + 2 * j] = F::zero();
-                        t[k * ny2 + 2 * j + 1] = F::zero();
+                        put_half(py, pad, ny, k, 2 * j, zero);
+                        put_half(py, pad, ny, k, 2 * j + 1, zero);
                     }
                 }
             }
         }
-        // Columns: DCT-II along y, times 1/λ, DCT-III along y, in place in t.
-        let py = &mut packed[..nx.div_ceil(2) * ny];
-        for (j, z) in py.chunks_exact_mut(ny).enumerate() {
-            let (a, b) = (2 * j * ny2, (2 * j + 1) * ny2);
-            self.ty.pack_forward(z, &t[a..a + ny], &t[b..b + ny]);
+        if nx % 2 == 1 {
+            // The last column has no partner: its pair's imaginary parts are zero.
+            for z in &mut py[nx / 2 * ny..] {
+                z.im = zero;
+            }
         }
+        // Columns: DCT-II along y, times 1/λ, DCT-III along y, in place.
         self.ty.forward.process_with_scratch(py, scratch);
         for (j, z) in py.chunks_exact_mut(ny).enumerate() {
             let il = &self.inv_lambda[2 * j * ny..(2 * j + 2) * ny];
@@ -494,23 +506,17 @@ impl<F: Real> Electrostatics<F> {
             self.ty.spectral_filter(z, ila, ilb);
         }
         self.ty.inverse.process_with_scratch(py, scratch);
-        for (j, z) in py.chunks_exact(ny).enumerate() {
-            let (a, b) = (2 * j * ny2, (2 * j + 1) * ny2);
-            let (ta, tb) = t[a..b + ny].split_at_mut(ny2);
-            // The partner past the last column stays zero.
-            let tb = if 2 * j + 1 < nx {
-                Some(&mut tb[..ny])
-            } else {
-                None
-            };
-            self.ty.unpack_inverse(z, &mut ta[..ny], tb);
-        }
-        // DCT-III along x, reading t transposed, into the rows of psi that are needed.
+        // The values of the column pairs (Makhoul's order undone on reading): DCT-III along x
+        // into the rows of psi that are needed.
         select(pairs, &self.rows_out);
         let px = &mut packed[..pairs.len() * nx];
         for (&j, z) in pairs.iter().zip(px.chunks_exact_mut(nx)) {
-            self.tx
-                .pack_inverse(z, |k| (t[k * ny2 + 2 * j], t[k * ny2 + 2 * j + 1]));
+            self.tx.pack_inverse(z, |k| {
+                (
+                    get_half(py, pad, ny, k, 2 * j),
+                    get_half(py, pad, ny, k, 2 * j + 1),
+                )
+            });
         }
         if !px.is_empty() {
             self.tx.inverse.process_with_scratch(px, scratch);
@@ -534,6 +540,44 @@ impl<F: Real> Electrostatics<F> {
     /// The charge map of the last evaluation, `[iy·nx + ix]`.
     pub fn charge_map(&self) -> &[F] {
         &self.map
+    }
+}
+
+/// Writes column `k`, row `iy` of the map transformed along x into the y pass's buffer `py`
+/// (row `ny`, the partner of an odd last row, into `pad`).
+#[inline(always)]
+fn put_half<F: Real>(py: &mut [Complex<F>], pad: &mut [F], ny: usize, k: usize, iy: usize, v: F) {
+    if iy == ny {
+        pad[k] = v;
+    } else {
+        let z = &mut py[k / 2 * ny + makhoul(iy, ny)];
+        if k % 2 == 1 {
+            z.im = v;
+        } else {
+            z.re = v;
+        }
+    }
+}
+
+/// Reads what [`put_half`] wrote (after the passes along y, the values they left there).
+#[inline(always)]
+fn get_half<F: Real>(py: &[Complex<F>], pad: &[F], ny: usize, k: usize, iy: usize) -> F {
+    if iy == ny {
+        pad[k]
+    } else {
+        let z = py[k / 2 * ny + makhoul(iy, ny)];
+        if k % 2 == 1 { z.im } else { z.re }
+    }
+}
+
+/// Makhoul's position of sample `i` of `n` (the even samples first, then the odd ones
+/// backwards): where [`PairDct::pack_forward`] puts it and [`PairDct::unpack_inverse`] finds it.
+#[inline(always)]
+fn makhoul(i: usize, n: usize) -> usize {
+    if i.is_multiple_of(2) {
+        i / 2
+    } else {
+        n - 1 - i / 2
     }
 }
 
@@ -572,10 +616,15 @@ fn smooth_weights<F: Real>(
     let h = b / 2.0;
     let (lo, hi) = span(a0 - h, a1 + h, b, n)?;
     let half_inv = 0.5 / b;
-    out.extend((lo..=hi).map(|i| {
+    // A loop rather than `extend`, which the compiler kept out of line (and out of the
+    // vector builds).
+    out.reserve(hi - lo + 1);
+    for i in lo..=hi {
         let c = (i as f64 + 0.5) * b;
-        F::of((tent_integral2(a1 - c, b) - tent_integral2(a0 - c, b)) * half_inv)
-    }));
+        out.push(F::of(
+            (tent_integral2(a1 - c, b) - tent_integral2(a0 - c, b)) * half_inv,
+        ));
+    }
     Some((lo, hi - lo + 1))
 }
 
