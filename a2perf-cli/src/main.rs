@@ -54,7 +54,8 @@ enum Command {
     /// Train, infer, generalize and report in one go (e.g. `a2perf run configs/quickstart.ron`).
     #[command(after_help = EXIT_CODES)]
     Run(pipeline_cmd::RunArgs),
-    /// Evaluate checkpoints, assign expertise levels and collect offline datasets.
+    /// Evaluate checkpoints, assign expertise levels and collect offline datasets (SIGTERM or
+    /// Ctrl-C stop it at the next episode without leaving a partial dataset; exit code 75).
     Collect(pipeline_cmd::CollectArgs),
     /// Train, infer, generalize and report an A2Perf participant folder (train.py,
     /// inference.py, requirements.txt) under the harness's meters, in a venv of its own.

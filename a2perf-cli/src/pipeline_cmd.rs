@@ -188,6 +188,11 @@ pub struct CollectArgs {
     /// Hide progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// After SIGTERM or Ctrl-C, seconds to wait for the collection to stop at its next episode
+    /// (dropping the dataset it was writing) before exiting anyway. Exit code 75 either way;
+    /// datasets already complete stay until a rerun collects them all anew.
+    #[arg(long, value_name = "SECONDS", default_value_t = 30.0)]
+    pub preempt_grace: f64,
 }
 
 /// How the training sample cost is assigned.
@@ -249,8 +254,9 @@ fn cancel_on_signals_with(grace: f64, repeat_exits: bool) -> Result<CancelToken>
                     std::process::exit(128 + signal);
                 }
                 eprintln!(
-                    "\n{name}: runs write a resume point at their next safe point and stop \
-                     (exiting within {} s, code {EXIT_INTERRUPTED}); {name} again to exit now",
+                    "\n{name}: runs write a resume point at their next safe point and stop, a \
+                     collection drops the dataset it is writing (exiting within {} s, code \
+                     {EXIT_INTERRUPTED}); {name} again to exit now",
                     grace.as_secs_f64()
                 );
                 t.cancel();
@@ -675,7 +681,7 @@ pub fn collect(registry: &Registry, args: &CollectArgs) -> Result<()> {
         },
         one_sigma: args.one_sigma,
         show_progress: !args.quiet,
-        cancel: Default::default(),
+        cancel: cancel_on_signals(args.preempt_grace)?,
     };
     let out = args.output.clone().unwrap_or_else(|| {
         runs[0]

@@ -356,3 +356,75 @@ fn a_second_trainer_of_a_run_leaves_it_to_the_first_and_exits_73() {
         "{err}"
     );
 }
+
+#[test]
+fn sigterm_stops_a_collection_without_a_partial_dataset_and_a_rerun_collects_it() {
+    if skip_in_debug("sigterm_stops_a_collection") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("results");
+    let cfg = config(dir.path(), &out, 200, 2_400, 1_200);
+    let (status, err) = run_to_end(&["train"], &cfg);
+    assert!(status.success(), "{err}");
+    let experiment = out.join("preempt");
+    let datasets = dir.path().join("datasets");
+    let collect = |episodes: &str| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_a2perf"));
+        c.arg("collect")
+            .arg(&experiment)
+            .args([
+                "--eval-episodes",
+                "1",
+                "--dataset-episodes",
+                episodes,
+                "--quiet",
+            ])
+            .arg("-o")
+            .arg(&datasets);
+        c
+    };
+    let names = || -> Vec<String> {
+        std::fs::read_dir(&datasets)
+            .into_iter()
+            .flatten()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect()
+    };
+    // A dataset far too long to finish: SIGTERM once its staging directory exists.
+    let child = collect("1000000")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for("the staging directory", || {
+        names().iter().any(|n| n.ends_with(".partial"))
+    });
+    signal(&child, "-TERM");
+    let (status, err) = stderr_of(child);
+    assert_eq!(status.code(), Some(75), "{err}");
+    assert!(err.contains("SIGTERM"), "{err}");
+    assert!(
+        names().is_empty(),
+        "a stopped collection left {:?}",
+        names()
+    );
+    // The same command with a short dataset finishes, every dataset complete.
+    let out = collect("2").output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let done = names();
+    assert!(
+        !done.is_empty() && done.iter().all(|n| !n.ends_with(".partial")),
+        "{done:?}"
+    );
+    for name in &done {
+        assert!(
+            datasets.join(name).join("a2perf_dataset.json").is_file(),
+            "{name} has no a2perf_dataset.json"
+        );
+    }
+}
