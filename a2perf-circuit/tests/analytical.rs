@@ -150,9 +150,10 @@ proptest! {
         }
 
         let (mut e64, mut e32) = (Electrostatics::<f64>::new(64.0, 32.0, 32, 16), Electrostatics::<f32>::new(64.0, 32.0, 32, 16));
-        for e in [&mut e64 as &mut dyn FixedSink, &mut e32] {
-            e.fixed(10.0, 4.0, 22.0, 12.0);
-        }
+        e64.add_fixed(10.0, 4.0, 22.0, 12.0);
+        e64.finish_fixed(1.0);
+        e32.add_fixed(10.0, 4.0, 22.0, 12.0);
+        e32.finish_fixed(1.0);
         let charges: Vec<Charge> = objs.iter().map(|&(_, _, w, h)| e64.movable_charge(w, h)).collect();
         let (mut d64, mut d32, mut d32g) = (vec![[0.0; 2]; n], vec![[0.0; 2]; n], vec![[0.0; 2]; n]);
         let s64 = e64.evaluate(&pos, &charges, 1.0, &mut d64);
@@ -167,18 +168,6 @@ proptest! {
         for (a, b) in d64.iter().flatten().zip(d32.iter().flatten()) {
             prop_assert!((a - b).abs() <= 1e-4 * scale, "density gradient {a} against {b}");
         }
-    }
-}
-
-/// A fixed rectangle into either instance of the density.
-trait FixedSink {
-    fn fixed(&mut self, x0: f64, y0: f64, x1: f64, y1: f64);
-}
-
-impl<F: a2perf_circuit::analytical::real::Real> FixedSink for Electrostatics<F> {
-    fn fixed(&mut self, x0: f64, y0: f64, x1: f64, y1: f64) {
-        self.add_fixed(x0, y0, x1, y1);
-        self.finish_fixed(1.0);
     }
 }
 

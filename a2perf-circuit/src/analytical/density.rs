@@ -59,7 +59,7 @@ pub struct Electrostatics<F: Real = f64> {
     /// When `ny` is odd: the transform along x of the zero row past the last (the partner of
     /// the last row), which the pass back along x reads.
     pad: Vec<F>,
-    /// The partner of the last row or column when their number is odd.
+    /// The partner of the last row when `ny` is odd (a row of zeros).
     zeros: Vec<F>,
     /// Every movable object's smoothed shares of the bins in x and in y (see
     /// [`smooth_weights`]), computed once per evaluation for the deposit and the gradient.
@@ -189,7 +189,6 @@ impl<F: Real> Electrostatics<F> {
             PairDct::new(&mut planner, ny),
         );
         let scratch_len = tx.scratch_len().max(ty.scratch_len());
-
         let (bx, by) = (width / nx as f64, height / ny as f64);
         // DCT-III(DCT-II(x)) = (n/2)·x in each dimension; the bin area turns charge into density.
         let norm = 4.0 / (nx * ny) as f64 / (bx * by);
@@ -221,7 +220,7 @@ impl<F: Real> Electrostatics<F> {
             map: vec![F::zero(); nx * ny],
             psi: vec![F::zero(); nx * ny],
             pad: vec![F::zero(); nx],
-            zeros: vec![F::zero(); nx.max(ny)],
+            zeros: vec![F::zero(); nx],
             wx: Vec::new(),
             wy: Vec::new(),
             foot: Vec::new(),
