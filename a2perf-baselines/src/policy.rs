@@ -30,6 +30,7 @@ use crate::model::{DiscreteArch, DiscreteNet, GaussianArch, SquashedArch};
 use crate::nn::MlpWs;
 use crate::nn::dist::{masked, tanh_gaussian};
 use crate::nn::norm::RunningNorm;
+use crate::nn::tanh::tanh;
 
 /// Version of the payload format written by [`NetPolicy::checkpoint`].
 pub const PAYLOAD_VERSION: u32 = 1;
@@ -418,9 +419,9 @@ impl NetPolicy {
                     .map(|i| {
                         if explore {
                             let sigma = tanh_gaussian::log_std(out[d + i]).exp();
-                            (out[i] + sigma * rng.normal() as f32).tanh()
+                            tanh(out[i] + sigma * rng.normal() as f32)
                         } else {
-                            out[i].tanh()
+                            tanh(out[i])
                         }
                     })
                     .zip(bounds(&self.action_space))

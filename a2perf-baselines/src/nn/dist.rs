@@ -169,6 +169,8 @@ pub mod gaussian {
 
 /// Reparameterised `tanh(N(mean, σ²))` with a bounded log-std, as in SAC.
 pub mod tanh_gaussian {
+    use crate::nn::tanh::tanh;
+
     /// Lower bound of `log σ`.
     pub const LOG_STD_MIN: f32 = -5.0;
     /// Upper bound of `log σ`.
@@ -178,11 +180,11 @@ pub mod tanh_gaussian {
 
     /// Maps an unbounded network output to `log σ ∈ [LOG_STD_MIN, LOG_STD_MAX]` smoothly.
     pub fn log_std(raw: f32) -> f32 {
-        LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (raw.tanh() + 1.0)
+        LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (tanh(raw) + 1.0)
     }
 
     fn dlog_std_draw(raw: f32) -> f32 {
-        let t = raw.tanh();
+        let t = tanh(raw);
         0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (1.0 - t * t)
     }
 
@@ -192,7 +194,7 @@ pub mod tanh_gaussian {
         for i in 0..mean.len() {
             let s = log_std(raw_log_std[i]);
             let u = mean[i] + s.exp() * eps[i];
-            let t = u.tanh();
+            let t = tanh(u);
             a[i] = t;
             logp += -0.5 * eps[i] * eps[i] - s - HALF_LN_2PI - (1.0 - t * t + EPS).ln();
         }
@@ -215,7 +217,7 @@ pub mod tanh_gaussian {
             let s = log_std(raw_log_std[i]);
             let sigma = s.exp();
             let u = mean[i] + sigma * eps[i];
-            let t = u.tanh();
+            let t = tanh(u);
             let dtdu = 1.0 - t * t;
             // ∂ log p / ∂u through the −ln(1 − tanh²u + ε) correction.
             let dlogp_du = 2.0 * t * dtdu / (dtdu + EPS);

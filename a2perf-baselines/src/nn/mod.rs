@@ -12,6 +12,7 @@ pub mod dist;
 pub mod embed;
 pub mod norm;
 pub mod optim;
+pub mod tanh;
 
 use a2perf_core::RngStream;
 use faer::linalg::matmul::matmul;
@@ -171,7 +172,7 @@ impl Activation {
     pub fn apply(self, v: &mut [f32]) {
         match self {
             Activation::Relu => v.iter_mut().for_each(|x| *x = x.max(0.0)),
-            Activation::Tanh => v.iter_mut().for_each(|x| *x = x.tanh()),
+            Activation::Tanh => tanh::tanh_in_place(v),
         }
     }
 
