@@ -708,6 +708,84 @@ impl GaussianArch {
         p[self.log_std..self.log_std + self.act_dim].fill(init_log_std);
         p
     }
+
+    /// The actor's forward pass over `batch` rows of `x` into `wa`, and the critic's (when
+    /// there is one) into `wc`, the two on two threads of rayon's pool when it has a free one.
+    /// The networks share no workspace and no result, so the values are exactly those of the
+    /// two passes one after the other.
+    ///
+    /// ```
+    /// use a2perf_baselines::model::GaussianArch;
+    /// use a2perf_baselines::nn::MlpWs;
+    /// use a2perf_core::RngStream;
+    /// let arch = GaussianArch::new(3, 2, &[8], true);
+    /// let p = arch.init_params(&mut RngStream::new(0, "init"), -1.0);
+    /// let x = [0.5, -1.0, 2.0, 0.1, 0.2, 0.3];
+    /// let (mut wa, mut wc) = (MlpWs::default(), MlpWs::default());
+    /// arch.forward_both(&p, &x, 2, &mut wa, &mut wc);
+    /// let critic = arch.critic.as_ref().unwrap();
+    /// let v = critic.forward(&p, &x, 2, &mut MlpWs::default()).to_vec();
+    /// assert_eq!(critic.output(&wc), &v[..]);
+    /// ```
+    pub fn forward_both(
+        &self,
+        params: &[f32],
+        x: &[f32],
+        batch: usize,
+        wa: &mut MlpWs,
+        wc: &mut MlpWs,
+    ) {
+        match &self.critic {
+            Some(c) => {
+                rayon::join(
+                    || self.actor.forward(params, x, batch, wa),
+                    || c.forward(params, x, batch, wc),
+                );
+            }
+            None => {
+                self.actor.forward(params, x, batch, wa);
+            }
+        }
+    }
+
+    /// The backward passes of the last [`forward_both`](Self::forward_both): the actor's from
+    /// the mean gradients `dmean` and the critic's from the value gradients `dvalues`, each
+    /// accumulated into its own parameters' part of `grads`, the two on two threads of rayon's
+    /// pool when it has a free one. The values are exactly those of the two
+    /// [`Mlp::backward`] calls one after the other (a test holds it to the bit).
+    #[allow(clippy::too_many_arguments)] // two networks' inputs, gradients and workspaces
+    pub fn backward_both(
+        &self,
+        params: &[f32],
+        grads: &mut [f32],
+        x: &[f32],
+        dmean: &[f32],
+        dvalues: &[f32],
+        wa: &mut MlpWs,
+        wc: &mut MlpWs,
+    ) {
+        let Some(c) = &self.critic else {
+            self.actor.backward(params, grads, x, dmean, wa, None);
+            return;
+        };
+        let (ra, rc) = (self.actor.param_range(), c.param_range());
+        let (ga, gc) = if ra.end <= rc.start {
+            let (lo, hi) = grads.split_at_mut(rc.start);
+            (&mut lo[ra], &mut hi[..rc.len()])
+        } else if rc.end <= ra.start {
+            let (lo, hi) = grads.split_at_mut(ra.start);
+            (&mut hi[..ra.len()], &mut lo[rc])
+        } else {
+            // Overlapping parameters (never from `new`): one after the other.
+            self.actor.backward(params, grads, x, dmean, wa, None);
+            c.backward(params, grads, x, dvalues, wc, None);
+            return;
+        };
+        rayon::join(
+            || self.actor.backward_local(params, ga, x, dmean, wa, None),
+            || c.backward_local(params, gc, x, dvalues, wc, None),
+        );
+    }
 }
 
 /// SAC actor: an MLP emitting the mean and the raw log-std of a tanh-squashed Gaussian.

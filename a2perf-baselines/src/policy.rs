@@ -616,4 +616,9 @@ impl Policy for NetPolicy {
             payload: self.encode()?,
         })
     }
+
+    /// A clone: greedy actions use the network and the frozen normalisation alone.
+    fn fork(&self) -> Option<Box<dyn Policy>> {
+        Some(Box::new(self.clone()))
+    }
 }

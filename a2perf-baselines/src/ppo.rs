@@ -227,11 +227,13 @@ impl Forward {
             Head::Discrete(net) => net.forward(&policy.params, batch),
             Head::Gaussian(g) => {
                 batch.concat_into(&mut self.x);
-                g.actor
-                    .forward(&policy.params, &self.x, batch.len(), &mut self.actor);
-                if let Some(c) = &g.critic {
-                    c.forward(&policy.params, &self.x, batch.len(), &mut self.critic);
-                }
+                g.forward_both(
+                    &policy.params,
+                    &self.x,
+                    batch.len(),
+                    &mut self.actor,
+                    &mut self.critic,
+                );
             }
             Head::Squashed(_) => {}
         }
@@ -664,24 +666,15 @@ impl PpoRun {
         for d in &mut self.dlog_std {
             *d -= self.cfg.entropy_coef;
         }
-        g.actor.backward(
+        g.backward_both(
             params,
             &mut self.grads,
             &self.fw.x,
             &self.dmean,
+            &self.dvalues,
             &mut self.fw.actor,
-            None,
+            &mut self.fw.critic,
         );
-        if let Some(c) = &g.critic {
-            c.backward(
-                params,
-                &mut self.grads,
-                &self.fw.x,
-                &self.dvalues,
-                &mut self.fw.critic,
-                None,
-            );
-        }
         if self.cfg.learn_log_std {
             for (k, d) in self.dlog_std.iter().enumerate() {
                 self.grads[g.log_std + k] += d;
@@ -781,12 +774,17 @@ impl OnlineRun for PpoRun {
     }
 
     fn iterate(&mut self, policy: &mut NetPolicy, split: &mut TimeSplit) -> Result<(), RunError> {
-        self.collect_rollout(policy, split)?;
-        split.time(TimePart::Learn, || {
-            self.compute_advantages(policy);
-            self.optimise(policy);
-        });
-        check_finite("PPO parameters", &policy.params)
+        // On a thread of rayon's pool, so that the environments' steps and the actor's and
+        // critic's passes side by side (`GaussianArch::forward_both`) hand work to the other
+        // thread through its queue, without a wake-up and a heap block per hand-off.
+        rayon::scope(|_| {
+            self.collect_rollout(policy, split)?;
+            split.time(TimePart::Learn, || {
+                self.compute_advantages(policy);
+                self.optimise(policy);
+            });
+            check_finite("PPO parameters", &policy.params)
+        })
     }
 
     fn env_steps(&self) -> u64 {

@@ -7,6 +7,8 @@ use a2perf_core::{
     TrainingContext, Value, VecEnv,
 };
 
+use rayon::prelude::*;
+
 use crate::batch::{ObsBatch, ObsLayout};
 use a2perf_core::{TimePart, TimeSplit};
 
@@ -193,6 +195,34 @@ struct Critic {
     adam: Adam,
     ws: MlpWs,
     ws_t: MlpWs,
+    /// Output gradient of the current pass (one per row).
+    dq: Vec<f32>,
+    /// Input gradient of the actor's pass (`[batch, obs + action]`).
+    dqin: Vec<f32>,
+}
+
+impl Critic {
+    /// One regression step on targets `y` at the inputs `qin`: forward, squared-error gradient,
+    /// backward, clipping and Adam.
+    #[allow(clippy::too_many_arguments)] // a critic's step: network, data, and two settings
+    fn regress(&mut self, qnet: &Mlp, qin: &[f32], y: &[f32], b: usize, max_norm: f32, lr: f32) {
+        ensure(&mut self.dq, b);
+        let q = qnet.forward(&self.params, qin, b, &mut self.ws);
+        for k in 0..b {
+            self.dq[k] = 2.0 * (q[k] - y[k]) / b as f32;
+        }
+        self.grads.fill(0.0);
+        qnet.backward(
+            &self.params,
+            &mut self.grads,
+            qin,
+            &self.dq,
+            &mut self.ws,
+            None,
+        );
+        clip_grad_norm(&mut self.grads, max_norm);
+        self.adam.step(&mut self.params, &self.grads, lr);
+    }
 }
 
 impl Algorithm for Sac {
@@ -272,11 +302,7 @@ struct SacRun {
     a_pi: Vec<f32>,
     logp: Vec<f32>,
     y: Vec<f32>,
-    dq: Vec<f32>,
-    dqin: Vec<f32>,
     dout: Vec<f32>,
-    qa: Vec<f32>,
-    qb: Vec<f32>,
     out_buf: Vec<f32>,
     total: u64,
     env_steps: u64,
@@ -317,6 +343,8 @@ impl SacRun {
                     params: p,
                     ws: MlpWs::default(),
                     ws_t: MlpWs::default(),
+                    dq: Vec::new(),
+                    dqin: Vec::new(),
                 }
             })
             .collect();
@@ -367,11 +395,7 @@ impl SacRun {
             a_pi: Vec::new(),
             logp: Vec::new(),
             y: Vec::new(),
-            dq: Vec::new(),
-            dqin: Vec::new(),
             dout: Vec::new(),
-            qa: Vec::new(),
-            qb: Vec::new(),
             out_buf: Vec::new(),
             total: ctx.settings().total_env_steps.max(1),
             env_steps: 0,
@@ -520,10 +544,12 @@ impl SacRun {
         );
         concat_obs_action(&self.xn, &self.a_pi, b, od, d, &mut self.qin);
         ensure(&mut self.y, b);
-        let (c0, c1) = self.critics.split_at_mut(1);
-        let (c0, c1) = (&mut c0[0], &mut c1[0]);
-        let q1 = self.qnet.forward(&c0.target, &self.qin, b, &mut c0.ws_t);
-        let q2 = self.qnet.forward(&c1.target, &self.qin, b, &mut c1.ws_t);
+        let (qnet, qin) = (&self.qnet, &self.qin);
+        self.critics.par_iter_mut().for_each(|c| {
+            qnet.forward(&c.target, qin, b, &mut c.ws_t);
+        });
+        let q1 = qnet.output(&self.critics[0].ws_t);
+        let q2 = qnet.output(&self.critics[1].ws_t);
         for k in 0..b {
             let boot = if self.sample.terminated[k] {
                 0.0
@@ -534,7 +560,8 @@ impl SacRun {
         }
     }
 
-    /// Both critics regress on `y` at the stored actions.
+    /// Both critics regress on `y` at the stored actions, side by side (each step is the
+    /// critic's own).
     fn critic_step(&mut self, b: usize, lr: f32) {
         concat_obs_action(
             &self.x,
@@ -544,25 +571,11 @@ impl SacRun {
             self.d,
             &mut self.qin,
         );
-        ensure(&mut self.dq, b);
-        for c in self.critics.iter_mut() {
-            let q = self.qnet.forward(&c.params, &self.qin, b, &mut c.ws);
-            #[allow(clippy::needless_range_loop)] // k indexes several parallel buffers
-            for k in 0..b {
-                self.dq[k] = 2.0 * (q[k] - self.y[k]) / b as f32;
-            }
-            c.grads.fill(0.0);
-            self.qnet.backward(
-                &c.params,
-                &mut c.grads,
-                &self.qin,
-                &self.dq,
-                &mut c.ws,
-                None,
-            );
-            clip_grad_norm(&mut c.grads, self.cfg.max_grad_norm);
-            c.adam.step(&mut c.params, &c.grads, lr);
-        }
+        let (qnet, qin, y) = (&self.qnet, &self.qin, &self.y);
+        let max_norm = self.cfg.max_grad_norm;
+        self.critics
+            .par_iter_mut()
+            .for_each(|c| c.regress(qnet, qin, y, b, max_norm, lr));
     }
 
     /// The actor minimises α log π(a|s) − min Q(s, a), with a reparameterised; leaves the
@@ -587,29 +600,35 @@ impl SacRun {
             &mut self.logp,
         );
         concat_obs_action(&self.x, &self.a_pi, b, od, d, &mut self.qin);
-        ensure(&mut self.qa, b);
-        ensure(&mut self.qb, b);
-        {
-            let (c0, c1) = self.critics.split_at_mut(1);
-            let (c0, c1) = (&mut c0[0], &mut c1[0]);
-            self.qa[..b].copy_from_slice(self.qnet.forward(&c0.params, &self.qin, b, &mut c0.ws));
-            self.qb[..b].copy_from_slice(self.qnet.forward(&c1.params, &self.qin, b, &mut c1.ws));
-        }
-        ensure(&mut self.dqin, b * (od + d));
+        let (qnet, qin) = (&self.qnet, &self.qin);
+        self.critics.par_iter_mut().for_each(|c| {
+            qnet.forward(&c.params, qin, b, &mut c.ws);
+        });
         ensure(&mut self.dout, b * 2 * d);
         self.dout[..b * 2 * d].fill(0.0);
-        for (ci, c) in self.critics.iter_mut().enumerate() {
+        {
             // Gradient flows through whichever critic is the minimum for each row.
+            let (c0, c1) = self.critics.split_at_mut(1);
+            let (c0, c1) = (&mut c0[0], &mut c1[0]);
+            ensure(&mut c0.dq, b);
+            ensure(&mut c1.dq, b);
+            let (qa, qb) = (qnet.output(&c0.ws), qnet.output(&c1.ws));
             for k in 0..b {
-                let pick = if self.qa[k] <= self.qb[k] { 0 } else { 1 };
-                self.dq[k] = if pick == ci { -1.0 / b as f32 } else { 0.0 };
+                let first = qa[k] <= qb[k];
+                c0.dq[k] = if first { -1.0 / b as f32 } else { 0.0 };
+                c1.dq[k] = if first { 0.0 } else { -1.0 / b as f32 };
             }
-            // The actor needs the critic's gradient with respect to its input (the action)
-            // only: no parameter gradients.
-            self.qnet
-                .backward_input(&c.params, &self.dq, &mut c.ws, &mut self.dqin);
+        }
+        // The actor needs each critic's gradient with respect to its input (the action) only:
+        // no parameter gradients. The two side by side, each into its own buffer.
+        self.critics.par_iter_mut().for_each(|c| {
+            ensure(&mut c.dqin, b * (od + d));
+            qnet.backward_input(&c.params, &c.dq, &mut c.ws, &mut c.dqin);
+        });
+        // Then their contributions, critic 0's first, as when one thread did it all.
+        for (ci, c) in self.critics.iter().enumerate() {
             for k in 0..b {
-                let da = &self.dqin[k * (od + d) + od..(k + 1) * (od + d)];
+                let da = &c.dqin[k * (od + d) + od..(k + 1) * (od + d)];
                 let row = &out[k * 2 * d..(k + 1) * 2 * d];
                 let (dm, dr) = self.dout[k * 2 * d..(k + 1) * 2 * d].split_at_mut(d);
                 let dlogp = if ci == 0 { alpha / b as f32 } else { 0.0 };
@@ -706,9 +725,14 @@ impl OnlineRun for SacRun {
     }
 
     fn iterate(&mut self, policy: &mut NetPolicy, split: &mut TimeSplit) -> Result<(), RunError> {
-        split.time(TimePart::Act, || self.choose_actions(policy));
-        split.time(TimePart::Env, || self.step_envs())?;
-        split.time(TimePart::Learn, || self.learn(policy))
+        // On a thread of rayon's pool, so that the environments' steps and the two critics'
+        // passes side by side hand work to the other thread through its queue, without a
+        // wake-up and a heap block per hand-off.
+        rayon::scope(|_| {
+            split.time(TimePart::Act, || self.choose_actions(policy));
+            split.time(TimePart::Env, || self.step_envs())?;
+            split.time(TimePart::Learn, || self.learn(policy))
+        })
     }
 
     fn env_steps(&self) -> u64 {

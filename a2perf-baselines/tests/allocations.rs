@@ -37,9 +37,13 @@ fn steady_state_allocations(mut update: impl FnMut(usize)) -> usize {
     .0
 }
 
-#[test]
-fn gaussian_actor_critic_update_allocates_nothing() {
-    // The locomotion PPO network at the paper's size, batch 128 (the paper's minibatch).
+/// Steady-state allocations of the locomotion PPO network's update at the paper's size, batch
+/// 128 (the paper's minibatch): `passes(arch, params, x, batch, dmean, dvalues, grads)` runs the
+/// forward and backward passes; then gradient clipping and Adam.
+fn gaussian_update_allocations(
+    mut passes: impl FnMut(&GaussianArch, &[f32], &[f32], usize, &[f32], &[f32], &mut [f32]) + Send,
+    on_pool: bool,
+) -> usize {
     let (obs_dim, act_dim, batch) = (160, 12, 128);
     let arch = GaussianArch::new(obs_dim, act_dim, &[512, 256], true);
     let mut rng = RngStream::new(0, "alloc");
@@ -47,23 +51,60 @@ fn gaussian_actor_critic_update_allocates_nothing() {
     let data = normals(&mut rng, 4 * batch * obs_dim, 1.0);
     let dmean = normals(&mut rng, batch * act_dim, 0.01);
     let dv = normals(&mut rng, batch, 0.01);
-    let critic = arch.critic.clone().expect("value head");
     let mut grads = vec![0.0; p.len()];
     let mut adam = Adam::new(p.len());
-    let (mut wa, mut wc) = (MlpWs::default(), MlpWs::default());
-    let n = steady_state_allocations(|k| {
-        let x = &data[k * batch * obs_dim..(k + 1) * batch * obs_dim];
-        grads.fill(0.0);
-        arch.actor.forward(&p, x, batch, &mut wa);
-        critic.forward(&p, x, batch, &mut wc);
-        arch.actor
-            .backward(&p, &mut grads, x, &dmean, &mut wa, None);
-        critic.backward(&p, &mut grads, x, &dv, &mut wc, None);
-        clip_grad_norm(&mut grads, 0.5);
-        adam.step(&mut p, &grads, 3e-4);
-    });
-    assert_eq!(n, 0, "{n} allocations in 4 steady-state Gaussian updates");
+    let mut count = || {
+        steady_state_allocations(|k| {
+            let x = &data[k * batch * obs_dim..(k + 1) * batch * obs_dim];
+            grads.fill(0.0);
+            passes(&arch, &p, x, batch, &dmean, &dv, &mut grads);
+            clip_grad_norm(&mut grads, 0.5);
+            adam.step(&mut p, &grads, 3e-4);
+        })
+    };
+    let n = if on_pool {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("a pool of two threads");
+        pool.install(count)
+    } else {
+        count()
+    };
     assert!(p.iter().all(|v| v.is_finite()));
+    n
+}
+
+#[test]
+fn gaussian_actor_critic_update_allocates_nothing() {
+    let (mut wa, mut wc) = (MlpWs::default(), MlpWs::default());
+    let n = gaussian_update_allocations(
+        |arch, p, x, batch, dmean, dv, grads| {
+            let critic = arch.critic.as_ref().expect("value head");
+            arch.actor.forward(p, x, batch, &mut wa);
+            critic.forward(p, x, batch, &mut wc);
+            arch.actor.backward(p, grads, x, dmean, &mut wa, None);
+            critic.backward(p, grads, x, dv, &mut wc, None);
+        },
+        false,
+    );
+    assert_eq!(n, 0, "{n} allocations in 4 steady-state Gaussian updates");
+}
+
+#[test]
+fn gaussian_update_on_two_threads_allocates_nothing() {
+    // PPO's update as PPO runs it: on a thread of rayon's pool, the actor's and critic's
+    // passes side by side and Adam in two halves. Allocations counted on that thread, where
+    // every hand-off to the other thread is made.
+    let (mut wa, mut wc) = (MlpWs::default(), MlpWs::default());
+    let n = gaussian_update_allocations(
+        |arch, p, x, batch, dmean, dv, grads| {
+            arch.forward_both(p, x, batch, &mut wa, &mut wc);
+            arch.backward_both(p, grads, x, dmean, dv, &mut wa, &mut wc);
+        },
+        true,
+    );
+    assert_eq!(n, 0, "{n} allocations in 4 steady-state two-thread updates");
 }
 
 #[test]

@@ -48,6 +48,19 @@ pub trait Policy: Send {
 
     /// Serialises the policy so that the algorithm's loader can rebuild it.
     fn checkpoint(&self) -> Result<Checkpoint, PolicyError>;
+
+    /// A copy of this policy whose greedy actions are this policy's own, to play evaluation
+    /// episodes beside it on another thread; `None` (the default) where there is none, such as
+    /// a policy living in another runtime. Evaluation is then one episode after another.
+    ///
+    /// ```
+    /// use a2perf_core::{ActMode, Observation, Policy, RandomPolicy, Space};
+    /// let p = RandomPolicy::new(Space::Discrete { n: 3 }, 0);
+    /// assert!(p.fork().is_none());
+    /// ```
+    fn fork(&self) -> Option<Box<dyn Policy>> {
+        None
+    }
 }
 
 impl<P: Policy + ?Sized> Policy for Box<P> {
@@ -59,6 +72,9 @@ impl<P: Policy + ?Sized> Policy for Box<P> {
     }
     fn checkpoint(&self) -> Result<Checkpoint, PolicyError> {
         (**self).checkpoint()
+    }
+    fn fork(&self) -> Option<Box<dyn Policy>> {
+        (**self).fork()
     }
 }
 

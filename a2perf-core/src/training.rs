@@ -2,6 +2,7 @@
 //! points and cancellation.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -231,6 +232,8 @@ pub struct TrainingContext<'a> {
     next_eval: u64,
     next_checkpoint: u64,
     eval_env: Option<Box<dyn Env>>,
+    /// The second evaluation environment, for a policy that forks ([`Policy::fork`]).
+    eval_env_b: Option<Box<dyn Env>>,
     started: Instant,
     clock_offset: f64,
     last_checkpoint: Option<u64>,
@@ -262,6 +265,7 @@ impl<'a> TrainingContext<'a> {
             next_eval,
             next_checkpoint,
             eval_env: None,
+            eval_env_b: None,
             started: Instant::now(),
             clock_offset: 0.0,
             last_checkpoint: None,
@@ -368,6 +372,12 @@ impl<'a> TrainingContext<'a> {
 
     /// Mean and std of greedy returns over `settings.eval_episodes` episodes. The evaluation seeds
     /// are the same at every evaluation (common random numbers), so curve points are comparable.
+    ///
+    /// A policy that forks ([`Policy::fork`]) plays the episodes on two threads of rayon's pool,
+    /// the copy in a second evaluation environment, each thread taking the next episode not yet
+    /// begun. An episode's return depends on its seed and the policy's greedy actions alone, and
+    /// the returns are summed in episode order, so the mean and std are those of the episodes
+    /// one after the other, to the bit.
     pub fn evaluate(&mut self, policy: &mut dyn Policy) -> Result<(f64, f64), RunError> {
         let t = Instant::now();
         let r = self.evaluate_untimed(policy);
@@ -380,14 +390,49 @@ impl<'a> TrainingContext<'a> {
         if self.eval_env.is_none() {
             self.eval_env = Some((self.env_factory)(usize::MAX)?);
         }
-        let env = self.eval_env.as_mut().ok_or(RunError::Cancelled)?;
         let seeds = RngStream::new(self.seed, "evaluation-seeds");
         let n = self.settings.eval_episodes.max(1);
-        let mut returns = Vec::with_capacity(n);
-        for i in 0..n {
-            let seed = seeds.derive_index(i as u64).next_u64();
-            let ep = rollout(env.as_mut(), policy, seed, ActMode::Greedy, false)?;
-            returns.push(ep.episode_return);
+        let seeds: Vec<u64> = (0..n)
+            .map(|i| seeds.derive_index(i as u64).next_u64())
+            .collect();
+        let fork = if n > 1 && rayon::current_num_threads() > 1 {
+            policy.fork()
+        } else {
+            None
+        };
+        if fork.is_some() && self.eval_env_b.is_none() {
+            self.eval_env_b = Some((self.env_factory)(usize::MAX - 1)?);
+        }
+        let (Some(env), env_b) = (self.eval_env.as_deref_mut(), self.eval_env_b.as_deref_mut())
+        else {
+            return Err(RunError::Cancelled);
+        };
+        let mut returns = vec![0.0; n];
+        match (fork, env_b) {
+            (Some(mut copy), Some(env_b)) => {
+                let next = AtomicUsize::new(0);
+                let play = |env: &mut dyn Env, policy: &mut dyn Policy| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        if i >= n {
+                            return Ok(done);
+                        }
+                        let ep = rollout(env, policy, seeds[i], ActMode::Greedy, false)?;
+                        done.push((i, ep.episode_return));
+                    }
+                };
+                let (a, b): (Result<_, RunError>, Result<_, RunError>) =
+                    rayon::join(|| play(env, policy), || play(env_b, copy.as_mut()));
+                for (i, r) in a?.into_iter().chain(b?) {
+                    returns[i] = r;
+                }
+            }
+            _ => {
+                for (r, &seed) in returns.iter_mut().zip(&seeds) {
+                    *r = rollout(env, policy, seed, ActMode::Greedy, false)?.episode_return;
+                }
+            }
         }
         let mean = returns.iter().sum::<f64>() / n as f64;
         let var = returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n as f64;

@@ -122,18 +122,38 @@ impl Linear {
         batch: usize,
         dx: Option<&mut [f32]>,
     ) {
+        self.backward_at(params, grads, 0, x, dy, batch, dx);
+    }
+
+    /// [`backward`](Self::backward) into a part of the gradient vector: `grads[0]` is the
+    /// gradient of parameter `base`.
+    #[allow(clippy::too_many_arguments)] // backward's arguments and the part's offset
+    fn backward_at(
+        &self,
+        params: &[f32],
+        grads: &mut [f32],
+        base: usize,
+        x: &[f32],
+        dy: &[f32],
+        batch: usize,
+        dx: Option<&mut [f32]>,
+    ) {
         if batch == 0 {
             return;
         }
+        let shift = |r: std::ops::Range<usize>| r.start - base..r.end - base;
         let dy = &dy[..batch * self.out];
         let dym = MatRef::from_row_major_slice(dy, batch, self.out);
         let xm = MatRef::from_row_major_slice(&x[..batch * self.inp], batch, self.inp);
         {
-            let gw =
-                MatMut::from_row_major_slice_mut(&mut grads[self.w_range()], self.out, self.inp);
+            let gw = MatMut::from_row_major_slice_mut(
+                &mut grads[shift(self.w_range())],
+                self.out,
+                self.inp,
+            );
             matmul(gw, Accum::Add, dym.transpose(), xm, 1.0f32, Par::Seq);
         }
-        let gb = &mut grads[self.b_range()];
+        let gb = &mut grads[shift(self.b_range())];
         for row in dy.chunks_exact(self.out) {
             for (g, d) in gb.iter_mut().zip(row) {
                 *g += d;
@@ -355,12 +375,80 @@ impl Mlp {
         ws: &mut MlpWs,
         dx: Option<&mut [f32]>,
     ) {
+        self.backward_into(params, grads, 0, x, dout, ws, dx);
+    }
+
+    /// The span of the parameter vector this MLP's layers occupy (empty for no layers).
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::{Activation, Mlp, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let first = Mlp::new(&mut alloc, &[3, 4, 2], Activation::Tanh);
+    /// let second = Mlp::new(&mut alloc, &[3, 1], Activation::Tanh);
+    /// assert_eq!(first.param_range(), 0..(3 * 4 + 4) + (4 * 2 + 2));
+    /// assert_eq!(second.param_range(), 26..30);
+    /// ```
+    pub fn param_range(&self) -> std::ops::Range<usize> {
+        let start = self.layers.iter().map(|l| l.offset).min().unwrap_or(0);
+        let end = self
+            .layers
+            .iter()
+            .map(|l| l.b_range().end)
+            .max()
+            .unwrap_or(start);
+        start..end
+    }
+
+    /// [`backward`](Self::backward) with the gradients written into `grads`, the part of the
+    /// gradient vector over [`param_range`](Self::param_range) alone: so that two networks
+    /// whose parameters do not overlap can run their backward passes at the same time, each
+    /// into its own part. The values are those [`backward`](Self::backward) accumulates.
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::{Activation, Mlp, MlpWs, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let _before = alloc.take(5);
+    /// let mlp = Mlp::new(&mut alloc, &[3, 4, 2], Activation::Tanh);
+    /// let params: Vec<f32> = (0..alloc.len()).map(|i| (i as f32 * 0.37).sin()).collect();
+    /// let (x, dout) = ([0.5, -1.0, 2.0], [1.0, -0.5]);
+    /// let mut ws = MlpWs::default();
+    /// mlp.forward(&params, &x, 1, &mut ws);
+    /// let mut grads = vec![0.0; params.len()];
+    /// mlp.backward(&params, &mut grads, &x, &dout, &mut ws, None);
+    /// let mut part = vec![0.0; mlp.param_range().len()];
+    /// mlp.backward_local(&params, &mut part, &x, &dout, &mut ws, None);
+    /// assert_eq!(part, grads[mlp.param_range()]);
+    /// ```
+    pub fn backward_local(
+        &self,
+        params: &[f32],
+        grads: &mut [f32],
+        x: &[f32],
+        dout: &[f32],
+        ws: &mut MlpWs,
+        dx: Option<&mut [f32]>,
+    ) {
+        self.backward_into(params, grads, self.param_range().start, x, dout, ws, dx);
+    }
+
+    /// The backward pass into a gradient part starting at parameter `base`.
+    #[allow(clippy::too_many_arguments)] // backward's arguments and the part's offset
+    fn backward_into(
+        &self,
+        params: &[f32],
+        grads: &mut [f32],
+        base: usize,
+        x: &[f32],
+        dout: &[f32],
+        ws: &mut MlpWs,
+        dx: Option<&mut [f32]>,
+    ) {
         let batch = ws.batch;
         let Some(first) = self.layers.first() else {
             return;
         };
-        let d = self.backward_to_first(params, grads, dout, ws);
-        first.backward(params, grads, x, d, batch, dx);
+        let d = self.backward_layers(params, Some((&mut *grads, base)), dout, ws);
+        first.backward_at(params, grads, base, x, d, batch, dx);
     }
 
     /// Backward pass through every layer but the first: accumulates those layers' parameter
@@ -374,7 +462,7 @@ impl Mlp {
         dout: &[f32],
         ws: &'w mut MlpWs,
     ) -> &'w [f32] {
-        self.backward_layers(params, Some(grads), dout, ws)
+        self.backward_layers(params, Some((grads, 0)), dout, ws)
     }
 
     /// The input gradient `dx` `[batch, inp]` of the last forward alone, the same values as
@@ -405,11 +493,11 @@ impl Mlp {
     }
 
     /// [`backward_to_first`](Self::backward_to_first), accumulating parameter gradients only
-    /// when `grads` is given.
+    /// when `grads` is given (with the parameter its first element belongs to).
     fn backward_layers<'w>(
         &self,
         params: &[f32],
-        mut grads: Option<&mut [f32]>,
+        mut grads: Option<(&mut [f32], usize)>,
         dout: &[f32],
         ws: &'w mut MlpWs,
     ) -> &'w [f32] {
@@ -427,8 +515,10 @@ impl Mlp {
         for i in (1..n).rev() {
             let layer = &self.layers[i];
             ensure(d_b, batch * layer.inp);
-            match grads.as_deref_mut() {
-                Some(g) => layer.backward(params, g, &outs[i - 1], d_a, batch, Some(d_b)),
+            match grads.as_mut() {
+                Some((g, base)) => {
+                    layer.backward_at(params, g, *base, &outs[i - 1], d_a, batch, Some(d_b))
+                }
                 None => layer.backward_input(params, d_a, batch, d_b),
             }
             self.activation.backward(
