@@ -295,6 +295,8 @@ struct SacRun {
     /// The actions in [−1, 1] (before mapping onto the bounds), as the replay stores them.
     a_norm: Vec<f32>,
     ws_actor: MlpWs,
+    /// The actor's pass over the next observations (the critics' targets).
+    ws_next: MlpWs,
     x: Vec<f32>,
     xn: Vec<f32>,
     qin: Vec<f32>,
@@ -303,7 +305,6 @@ struct SacRun {
     logp: Vec<f32>,
     y: Vec<f32>,
     dout: Vec<f32>,
-    out_buf: Vec<f32>,
     total: u64,
     env_steps: u64,
     /// Gradient updates earned and not yet made (`updates_per_step` per environment step).
@@ -388,6 +389,7 @@ impl SacRun {
             actions: vec![Action::Continuous(vec![0.0; d]); n_env],
             a_norm: vec![0.0; n_env * d],
             ws_actor: MlpWs::default(),
+            ws_next: MlpWs::default(),
             x: Vec::new(),
             xn: Vec::new(),
             qin: Vec::new(),
@@ -396,7 +398,6 @@ impl SacRun {
             logp: Vec::new(),
             y: Vec::new(),
             dout: Vec::new(),
-            out_buf: Vec::new(),
             total: ctx.settings().total_env_steps.max(1),
             env_steps: 0,
             credit: 0.0,
@@ -510,7 +511,16 @@ impl SacRun {
         let alpha = self.log_alpha.exp();
         self.sample.obs.concat_into(&mut self.x);
         self.sample.next.concat_into(&mut self.xn);
-        self.critic_targets(policy, b, alpha);
+        // The actor's two passes (next observations for the targets, observations for its own
+        // step) read only its parameters, which change at the end: both now, side by side.
+        let (actor, params) = (&self.actor, &policy.params);
+        let (ws_next, ws_actor) = (&mut self.ws_next, &mut self.ws_actor);
+        let (xn, x) = (&self.xn, &self.x);
+        rayon::join(
+            || actor.forward(params, xn, b, ws_next),
+            || actor.forward(params, x, b, ws_actor),
+        );
+        self.critic_targets(b, alpha);
         self.critic_step(b, lr);
         self.actor_step(policy, b, alpha, lr);
         // Temperature: minimise −log α · (log π + target entropy).
@@ -525,11 +535,10 @@ impl SacRun {
     }
 
     /// `y` = r + γ(1−done)(min Q'(s', a') − α log π(a'|s')), with a' sampled from the actor.
-    fn critic_targets(&mut self, policy: &NetPolicy, b: usize, alpha: f32) {
+    /// The actor's pass over the next observations is in `ws_next`.
+    fn critic_targets(&mut self, b: usize, alpha: f32) {
         let (d, od) = (self.d, self.od);
-        let out = self
-            .actor
-            .forward(&policy.params, &self.xn, b, &mut self.ws_actor);
+        let out = self.actor.output(&self.ws_next);
         ensure(&mut self.eps, b * d);
         ensure(&mut self.a_pi, b * d);
         ensure(&mut self.logp, b);
@@ -582,14 +591,7 @@ impl SacRun {
     /// log-probabilities of its actions in `logp` for the temperature.
     fn actor_step(&mut self, policy: &mut NetPolicy, b: usize, alpha: f32, lr: f32) {
         let (d, od) = (self.d, self.od);
-        ensure(&mut self.out_buf, b * 2 * d);
-        self.out_buf[..b * 2 * d].copy_from_slice(self.actor.forward(
-            &policy.params,
-            &self.x,
-            b,
-            &mut self.ws_actor,
-        ));
-        let out = &self.out_buf;
+        let out = self.actor.output(&self.ws_actor);
         sample_squashed(
             out,
             b,
