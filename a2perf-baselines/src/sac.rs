@@ -204,7 +204,6 @@ struct Critic {
 impl Critic {
     /// One regression step on targets `y` at the inputs `qin`: forward, squared-error gradient,
     /// backward, clipping and Adam.
-    #[allow(clippy::too_many_arguments)] // a critic's step: network, data, and two settings
     fn regress(&mut self, qnet: &Mlp, qin: &[f32], y: &[f32], b: usize, max_norm: f32, lr: f32) {
         ensure(&mut self.dq, b);
         let q = qnet.forward(&self.params, qin, b, &mut self.ws);

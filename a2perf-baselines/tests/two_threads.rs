@@ -91,8 +91,10 @@ fn adam_in_two_halves_is_adam_in_one() {
             }
         };
         if on_pool {
-            assert!(pool().install(rayon::current_thread_index).is_some());
-            pool().install(steps);
+            pool().install(|| {
+                assert!(rayon::current_thread_index().is_some());
+                steps();
+            });
         } else {
             assert!(rayon::current_thread_index().is_none());
             steps();

@@ -54,7 +54,7 @@ pub trait Policy: Send {
     /// a policy living in another runtime. Evaluation is then one episode after another.
     ///
     /// ```
-    /// use a2perf_core::{ActMode, Observation, Policy, RandomPolicy, Space};
+    /// use a2perf_core::{Policy, RandomPolicy, Space};
     /// let p = RandomPolicy::new(Space::Discrete { n: 3 }, 0);
     /// assert!(p.fork().is_none());
     /// ```
