@@ -154,6 +154,9 @@ impl Rows {
 #[derive(Clone, Debug, Default)]
 pub struct ObsBatch {
     dims: Vec<usize>,
+    /// Values stored per row of each tensor: its `dims` entry, or 0 for a tensor left out by
+    /// [`keep_tensors`](ObsBatch::keep_tensors).
+    widths: Vec<usize>,
     names: Vec<String>,
     data: Vec<Rows>,
     mask: Vec<bool>,
@@ -176,10 +179,34 @@ impl ObsBatch {
                 })
                 .collect(),
             names: layout.tensors.iter().map(|(n, _)| n.clone()).collect(),
+            widths: dims.clone(),
             dims,
             mask: Vec::new(),
             mask_width: layout.num_actions.unwrap_or(0),
             len: 0,
+        }
+    }
+
+    /// Keeps the values of tensors `keep` only (indices into the layout): every other tensor
+    /// is still checked on [`write_row`](Self::write_row) but neither stored nor copied, and
+    /// reads as empty. For the batches a network fills and reads many times when it reads few
+    /// of the tensors: the circuit network reads two of eleven, and the others (the netlist's
+    /// graph, the same in every row) are most of an observation's values.
+    ///
+    /// ```
+    /// use a2perf_baselines::batch::{ObsBatch, ObsLayout};
+    ///
+    /// let layout = ObsLayout::floats(vec![("a".into(), vec![2]), ("b".into(), vec![3])], None);
+    /// let mut batch = ObsBatch::new(&layout);
+    /// batch.keep_tensors(&[1]);
+    /// batch.resize(4);
+    /// assert!(batch.tensor(0).is_empty());
+    /// assert_eq!(batch.tensor(1).len(), 4 * 3);
+    /// assert_eq!(batch.dim(0), 2);
+    /// ```
+    pub fn keep_tensors(&mut self, keep: &[usize]) {
+        for (i, (w, d)) in self.widths.iter_mut().zip(&self.dims).enumerate() {
+            *w = if keep.contains(&i) { *d } else { 0 };
         }
     }
 
@@ -195,7 +222,7 @@ impl ObsBatch {
 
     /// Sets the number of rows in use, growing buffers as needed (new rows are zero, masks legal).
     pub fn resize(&mut self, rows: usize) {
-        for (d, dim) in self.data.iter_mut().zip(&self.dims) {
+        for (d, dim) in self.data.iter_mut().zip(&self.widths) {
             if d.len() < rows * dim {
                 d.grow(rows * dim);
             }
@@ -238,14 +265,16 @@ impl ObsBatch {
                     t.data.len()
                 )));
             }
-            let at = row * dim..(row + 1) * dim;
+            let width = self.widths[i];
+            let at = row * width..(row + 1) * width;
+            let s = ..width;
             match (&mut self.data[i], &t.data) {
-                (Rows::F32(d), TensorData::F32(s)) => d[at].copy_from_slice(s),
-                (Rows::I32(d), TensorData::I32(s)) => d[at].copy_from_slice(s),
-                (Rows::I32(d), TensorData::U8(s)) => d[at]
+                (Rows::F32(d), TensorData::F32(v)) => d[at].copy_from_slice(&v[s]),
+                (Rows::I32(d), TensorData::I32(v)) => d[at].copy_from_slice(&v[s]),
+                (Rows::I32(d), TensorData::U8(v)) => d[at]
                     .iter_mut()
-                    .zip(s)
-                    .for_each(|(d, s)| *d = i32::from(*s)),
+                    .zip(&v[s])
+                    .for_each(|(d, v)| *d = i32::from(*v)),
                 (rows, data) => {
                     let expected = match rows {
                         Rows::F32(_) => "float32",
@@ -275,10 +304,11 @@ impl ObsBatch {
         Ok(())
     }
 
-    /// Copies row `src_row` of `src` (same layout) into row `row` of `self`.
+    /// Copies row `src_row` of `src` (same layout, keeping at least the tensors `self` keeps)
+    /// into row `row` of `self`.
     pub fn copy_row(&mut self, row: usize, src: &ObsBatch, src_row: usize) {
-        for (i, dim) in self.dims.iter().enumerate() {
-            self.data[i].copy_range(row * dim, &src.data[i], src_row * dim, *dim);
+        for (i, (dim, from)) in self.widths.iter().zip(&src.widths).enumerate() {
+            self.data[i].copy_range(row * dim, &src.data[i], src_row * from, *dim);
         }
         let w = self.mask_width;
         if w > 0 {
@@ -303,7 +333,7 @@ impl ObsBatch {
     /// All rows of float tensor `i`, `[len, dim]` (empty for an integer tensor).
     pub fn tensor(&self, i: usize) -> &[f32] {
         match &self.data[i] {
-            Rows::F32(v) => &v[..self.len * self.dims[i]],
+            Rows::F32(v) => &v[..self.len * self.widths[i]],
             Rows::I32(_) => &[],
         }
     }
@@ -311,14 +341,14 @@ impl ObsBatch {
     /// All rows of integer tensor `i`, `[len, dim]`, exact (empty for a float tensor).
     pub fn ints(&self, i: usize) -> &[i32] {
         match &self.data[i] {
-            Rows::I32(v) => &v[..self.len * self.dims[i]],
+            Rows::I32(v) => &v[..self.len * self.widths[i]],
             Rows::F32(_) => &[],
         }
     }
 
     /// Row `row` of float tensor `i` (empty for an integer tensor).
     pub fn tensor_row(&self, i: usize, row: usize) -> &[f32] {
-        let d = self.dims[i];
+        let d = self.widths[i];
         match &self.data[i] {
             Rows::F32(v) => &v[row * d..(row + 1) * d],
             Rows::I32(_) => &[],
@@ -327,7 +357,7 @@ impl ObsBatch {
 
     /// Row `row` of integer tensor `i` (empty for a float tensor).
     pub fn int_row(&self, i: usize, row: usize) -> &[i32] {
-        let d = self.dims[i];
+        let d = self.widths[i];
         match &self.data[i] {
             Rows::I32(v) => &v[row * d..(row + 1) * d],
             Rows::F32(_) => &[],
@@ -343,7 +373,7 @@ impl ObsBatch {
     /// Row `row` of float tensor `i`, mutable (for normalisation in place; empty for an integer
     /// tensor).
     pub fn row_mut(&mut self, i: usize, row: usize) -> &mut [f32] {
-        let d = self.dims[i];
+        let d = self.widths[i];
         match &mut self.data[i] {
             Rows::F32(v) => &mut v[row * d..(row + 1) * d],
             Rows::I32(_) => &mut [],
@@ -352,7 +382,7 @@ impl ObsBatch {
 
     /// Row `row` of integer tensor `i`, mutable (empty for a float tensor).
     pub fn int_row_mut(&mut self, i: usize, row: usize) -> &mut [i32] {
-        let d = self.dims[i];
+        let d = self.widths[i];
         match &mut self.data[i] {
             Rows::I32(v) => &mut v[row * d..(row + 1) * d],
             Rows::F32(_) => &mut [],
@@ -378,6 +408,7 @@ impl ObsBatch {
     /// Writes all tensors of every row, concatenated and converted to `f32`, into `out`
     /// (`[len, total_dim]`): the input of flat MLPs.
     pub fn concat_into(&self, out: &mut Vec<f32>) {
+        debug_assert_eq!(self.widths, self.dims, "a flat network reads every tensor");
         let total: usize = self.dims.iter().sum();
         crate::nn::ensure(out, self.len * total);
         for r in 0..self.len {
@@ -439,6 +470,40 @@ mod tests {
         };
         b.write_row(0, &small).unwrap();
         assert_eq!(b.ints(0), &[7, 255]);
+    }
+
+    #[test]
+    fn a_batch_keeping_some_tensors_still_checks_the_others() {
+        let obs = |ids: Vec<i32>| Observation {
+            tensors: vec![
+                Tensor::new("ids", &[ids.len()], ids),
+                Tensor::new("x", &[1], vec![0.5f32]),
+            ],
+            action_mask: None,
+        };
+        let mut full = ObsBatch::new(&layout());
+        let mut kept = ObsBatch::new(&layout());
+        kept.keep_tensors(&[1]);
+        for b in [&mut full, &mut kept] {
+            b.push(&obs(vec![4, 5])).unwrap();
+            b.push(&obs(vec![6, 7])).unwrap();
+        }
+        assert_eq!(full.ints(0), &[4, 5, 6, 7]);
+        assert!(kept.ints(0).is_empty() && kept.int_row(0, 1).is_empty());
+        assert_eq!(
+            (kept.tensor(1), kept.tensor_row(1, 1)),
+            (&[0.5, 0.5][..], &[0.5][..])
+        );
+        assert_eq!(kept.dim(0), 2);
+        // A tensor it does not keep is still checked: bad input is refused, not dropped.
+        let err = kept.push(&obs(vec![1, 2, 3])).unwrap_err().to_string();
+        assert!(err.contains("`ids` has 3 values"), "{err}");
+        // Rows copied in from a batch that keeps everything.
+        let mut copy = ObsBatch::new(&layout());
+        copy.keep_tensors(&[1]);
+        copy.gather(&full, &[1, 0]);
+        assert_eq!(copy.tensor(1), &[0.5, 0.5]);
+        assert!(copy.ints(0).is_empty());
     }
 
     #[test]

@@ -242,6 +242,12 @@ impl DdqnRun {
         let params = net.init_params(&mut ctx.rng("ddqn/init"));
         let target_params = params.clone();
         let target_net = net.clone();
+        // Minibatches hold only what the networks read (the circuit network: 2 of 11 tensors).
+        let mut sample = ReplaySample::new(&layout);
+        if let Some(keep) = net.inputs() {
+            sample.obs.keep_tensors(&keep);
+            sample.next.keep_tensors(&keep);
+        }
         let mut policy =
             NetPolicy::new("ddqn", spec, Head::Discrete(net), params, None, ctx.seed())?;
         policy.explore_epsilon = cfg.epsilon_greedy;
@@ -256,7 +262,7 @@ impl DdqnRun {
             adam: Adam::new(policy.params.len()),
             grads: vec![0.0; policy.params.len()],
             replay: ReplayBuffer::new(&layout, cfg.replay_capacity, 0),
-            sample: ReplaySample::new(&layout),
+            sample,
             idx: Vec::new(),
             rng: ctx.rng("ddqn/explore"),
             sample_rng: ctx.rng("ddqn/replay"),
@@ -341,17 +347,24 @@ impl DdqnRun {
     ///
     /// It reads the networks' scored logits only ([`DiscreteNet::forward_scored`]: on A2Perf's
     /// padded circuit canvas, the grid's cells, not the 128·128 actions) and the next
-    /// observations' masks only. That is exact: the scored actions keep the actions' order,
+    /// observations' masks only (at the scored actions alone). That is exact: the scored actions keep the actions' order,
     /// the others are never legal, so the masked argmax (ties to the lowest action), the
     /// target values and the gradients are the same as over every action.
     fn update(&mut self, net: &mut DiscreteNet, params: &mut [f32], lr: f32) {
         let cfg = &self.cfg;
         let sample = &mut self.sample;
-        self.replay
-            .sample_next_masks(cfg.batch_size, &mut self.sample_rng, &mut self.idx, sample);
-        let b = sample.obs.len();
         let some = net.scored_actions_into(&mut self.scored);
         let scored = some.then_some(self.scored.as_slice());
+        let (rng, idx) = (&mut self.sample_rng, &mut self.idx);
+        match scored {
+            None => self
+                .replay
+                .sample_next_masks(cfg.batch_size, rng, idx, sample),
+            Some(actions) => self
+                .replay
+                .sample_legal_at(cfg.batch_size, rng, idx, sample, actions),
+        }
+        let b = sample.obs.len();
         net.forward_scored(params, &sample.next);
         let m = net.logit_width();
         self.next_best.clear();
@@ -359,7 +372,8 @@ impl DdqnRun {
             let row = &net.logits()[k * m..(k + 1) * m];
             let best = match scored {
                 None => masked::argmax(row, sample.next.mask(k)),
-                Some(actions) => masked::argmax_at(row, actions, sample.next.mask(k)),
+                // Column `j` is legal as its action is (`argmax_at` over the whole mask).
+                Some(_) => masked::argmax(row, Some(&sample.next_legal[k * m..(k + 1) * m])),
             };
             self.next_best.push(best.unwrap_or(usize::MAX));
         }

@@ -299,6 +299,27 @@ impl DiscreteNet {
         }
     }
 
+    /// The observation tensors the network reads (indices into its layout), or `None` when it
+    /// reads every one (a flat MLP). A batch it alone reads need hold only these
+    /// ([`ObsBatch::keep_tensors`]): the circuit network reads `features` and `grid`, not the
+    /// netlist's graph.
+    ///
+    /// ```
+    /// use a2perf_baselines::model::{DiscreteArch, DiscreteNet};
+    /// use a2perf_baselines::nn::{Activation, Mlp, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let policy = Mlp::new(&mut alloc, &[2, 3], Activation::Relu);
+    /// let net = DiscreteNet::from_arch(DiscreteArch::Flat { policy, value: None }, 3, alloc.len());
+    /// assert_eq!(net.inputs(), None);
+    /// ```
+    pub fn inputs(&self) -> Option<Vec<usize>> {
+        match &self.arch {
+            DiscreteArch::Flat { .. } => None,
+            DiscreteArch::Circuit(c) => Some(vec![c.features, c.grid]),
+            DiscreteArch::Web(w) => Some(w.inputs()),
+        }
+    }
+
     /// Forward pass that computes only the logits of the
     /// [scored actions](Self::scored_actions_into): [`logits`](Self::logits) is then
     /// `[B, m]`, column `j` being the `j`-th scored action. Every value is the same, bit for
@@ -537,11 +558,38 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
     let g = c
         .global
         .forward(params, batch.tensor(c.features), b, &mut ws.a);
-    let [gc, cx, h, _, _, _, _, scores, ..] = &mut ws.v;
+    let [gc, cx, h, _, _, _, _, scores, pos, ..] = &mut ws.v;
     ensure(gc, b * k);
     c.global_to_cell.forward(params, g, b, gc);
+    // The cells' position inputs, the same in every row.
+    let with_pos = pi == CELL_POSITION_INPUTS && rows * cols == nc;
+    if with_pos {
+        ensure(pos, nc * CELL_POSITION_INPUTS);
+        for (i, p) in pos
+            .chunks_exact_mut(CELL_POSITION_INPUTS)
+            .take(nc)
+            .enumerate()
+        {
+            let x = 2.0 * ((i % cols) as f32 + 0.5) / cols as f32 - 1.0;
+            let y = 2.0 * ((i / cols) as f32 + 0.5) / rows as f32 - 1.0;
+            p.copy_from_slice(&[x, y, x.abs(), y.abs()]);
+        }
+    }
     ensure(cx, b * nc * stride);
+    ensure(h, b * nc * k);
+    // The cells' scores: the logits themselves, or laid out on the padded canvas below.
+    let direct = c.padded_side == 0 || scored;
+    let out: &mut [f32] = if direct {
+        &mut ws.logits
+    } else {
+        ensure(scores, b * nc);
+        scores
+    };
     let grid = batch.tensor(c.grid);
+    // One batch row at a time: its cells' inputs, hidden layer, ReLU and scores while they are
+    // in cache (256 Ariane pages hold 129,024 cells, a 26 MB hidden layer). Every value is the
+    // one the whole batch at once gives: a row of a layer's output reads that row of its input
+    // only (the cell-wise GEMM's products and sums run in the same order).
     for r in 0..b {
         let src = &grid[r * ch * nc..(r + 1) * ch * nc];
         let dst = &mut cx[r * nc * stride..(r + 1) * nc * stride];
@@ -550,14 +598,18 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
                 dst[i * stride + chn] = src[chn * nc + i];
             }
         }
-        if pi == CELL_POSITION_INPUTS && rows * cols == nc {
-            for (i, cell) in dst.chunks_exact_mut(stride).enumerate() {
-                let x = 2.0 * ((i % cols) as f32 + 0.5) / cols as f32 - 1.0;
-                let y = 2.0 * ((i / cols) as f32 + 0.5) / rows as f32 - 1.0;
+        if with_pos {
+            for (cell, p) in dst
+                .chunks_exact_mut(stride)
+                .zip(pos.chunks_exact(CELL_POSITION_INPUTS))
+            {
                 // Four stores, not a copy of a slice of unknown length (a `memmove` call per
                 // cell and row).
-                if let Some(p) = cell.last_chunk_mut::<CELL_POSITION_INPUTS>() {
-                    *p = [x, y, x.abs(), y.abs()];
+                if let (Some(d), Ok(p)) = (
+                    cell.last_chunk_mut::<CELL_POSITION_INPUTS>(),
+                    <&[f32; CELL_POSITION_INPUTS]>::try_from(p),
+                ) {
+                    *d = *p;
                 }
             }
         } else if pi > 0 {
@@ -565,23 +617,19 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
                 dst[i * stride + ch..(i + 1) * stride].fill(0.0);
             }
         }
-    }
-    ensure(h, b * nc * k);
-    c.cell_in.forward(params, cx, b * nc, h);
-    for r in 0..b {
+        let hr = &mut h[r * nc * k..(r + 1) * nc * k];
+        c.cell_in.forward(params, dst, nc, hr);
         let gr = &gc[r * k..(r + 1) * k];
-        for row in h[r * nc * k..(r + 1) * nc * k].chunks_exact_mut(k) {
+        for row in hr.chunks_exact_mut(k) {
             for (x, g) in row.iter_mut().zip(gr) {
                 *x = (*x + g).max(0.0);
             }
         }
+        c.score
+            .forward(params, hr, nc, &mut out[r * nc..(r + 1) * nc]);
     }
-    if c.padded_side == 0 || scored {
-        c.score.forward(params, h, b * nc, &mut ws.logits);
-    } else {
-        // Score the cells, then lay them out on the padded canvas; the padding is never legal.
-        ensure(scores, b * nc);
-        c.score.forward(params, h, b * nc, scores);
+    if !direct {
+        // Lay the cells' scores out on the padded canvas; the padding is never legal.
         let n = c.padded_side * c.padded_side;
         for r in 0..b {
             let row = &mut ws.logits[r * n..(r + 1) * n];

@@ -529,6 +529,20 @@ impl ObsStore {
         }
     }
 
+    /// Writes into `out` whether each of `actions` is legal in `slot`'s mask (`true` without a
+    /// mask): the entries of [`read_mask`](Self::read_mask)'s row at those actions, without
+    /// decoding the rest (a learner that scores 504 of A2Perf's 16,384 circuit actions).
+    pub(crate) fn read_mask_at(&self, slot: usize, actions: &[usize], out: &mut [bool]) {
+        if self.words == 0 {
+            out.fill(true);
+            return;
+        }
+        let bits = &self.mask[slot * self.words..(slot + 1) * self.words];
+        for (o, &a) in out.iter_mut().zip(actions) {
+            *o = (bits[a / 64] >> (a % 64)) & 1 == 1;
+        }
+    }
+
     /// Bytes reserved (tensor columns, mask bits and slot bookkeeping).
     pub(crate) fn bytes(&self) -> usize {
         self.tensors.iter().map(Stored::bytes).sum::<usize>()

@@ -356,7 +356,7 @@ impl PpoRun {
         };
         let rows = cfg.num_steps * n_env;
         let mut ro = Rollout {
-            obs: ObsBatch::new(layout),
+            obs: ObsBatch::default(),
             act_d: vec![0; rows],
             act_c: vec![0.0; rows * act_dim],
             logp: vec![0.0; rows],
@@ -366,8 +366,22 @@ impl PpoRun {
             adv: vec![0.0; rows],
             ret: vec![0.0; rows],
         };
+        // Observation batches hold only what the network reads (the circuit network: 2 of 11
+        // tensors); normalisation statistics, when kept, see every tensor.
+        let keep = match &policy.head {
+            Head::Discrete(net) if policy.obs_norm.is_none() => net.inputs(),
+            _ => None,
+        };
+        let batch = || {
+            let mut b = ObsBatch::new(layout);
+            if let Some(keep) = &keep {
+                b.keep_tensors(keep);
+            }
+            b
+        };
+        ro.obs = batch();
         ro.obs.resize(rows);
-        let mut raw = ObsBatch::new(layout);
+        let mut raw = batch();
         raw.resize(n_env);
         Self {
             venv,
@@ -382,10 +396,10 @@ impl PpoRun {
             scaler: RewardScaler::new(n_env, f64::from(cfg.gamma)),
             ro,
             raw,
-            now: ObsBatch::new(layout),
-            finals: ObsBatch::new(layout),
+            now: batch(),
+            finals: batch(),
             final_rows: Vec::new(),
-            mb: ObsBatch::new(layout),
+            mb: batch(),
             fw: Forward {
                 x: Vec::new(),
                 actor: MlpWs::default(),

@@ -78,6 +78,9 @@ pub struct ReplaySample {
     pub rewards: Vec<f32>,
     /// Whether the next state is terminal (no bootstrap).
     pub terminated: Vec<bool>,
+    /// After [`ReplayBuffer::sample_legal_at`]: whether each of its actions is legal in each
+    /// next observation, `[B, actions]` (empty otherwise).
+    pub next_legal: Vec<bool>,
 }
 
 impl ReplaySample {
@@ -90,6 +93,7 @@ impl ReplaySample {
             act_c: Vec::new(),
             rewards: Vec::new(),
             terminated: Vec::new(),
+            next_legal: Vec::new(),
         }
     }
 }
@@ -278,7 +282,7 @@ impl ReplayBuffer {
         idx: &mut Vec<usize>,
         out: &mut ReplaySample,
     ) {
-        self.sample_into(n, rng, idx, out, true);
+        self.sample_into(n, rng, idx, out, Masks::All);
     }
 
     /// As [`sample`](Self::sample), the same transitions, but without decoding the
@@ -291,7 +295,21 @@ impl ReplayBuffer {
         idx: &mut Vec<usize>,
         out: &mut ReplaySample,
     ) {
-        self.sample_into(n, rng, idx, out, false);
+        self.sample_into(n, rng, idx, out, Masks::Next);
+    }
+
+    /// As [`sample_next_masks`](Self::sample_next_masks), the same transitions, but the next
+    /// observations' masks are read at `actions` only, into `out.next_legal` (`out.next`'s masks
+    /// keep whatever they held): Q-learning over a network's scored actions needs no more.
+    pub fn sample_legal_at(
+        &self,
+        n: usize,
+        rng: &mut RngStream,
+        idx: &mut Vec<usize>,
+        out: &mut ReplaySample,
+        actions: &[usize],
+    ) {
+        self.sample_into(n, rng, idx, out, Masks::LegalAt(actions));
     }
 
     fn sample_into(
@@ -300,7 +318,7 @@ impl ReplayBuffer {
         rng: &mut RngStream,
         idx: &mut Vec<usize>,
         out: &mut ReplaySample,
-        obs_masks: bool,
+        masks: Masks<'_>,
     ) {
         idx.clear();
         idx.extend((0..n).map(|_| rng.index(self.size)));
@@ -310,13 +328,29 @@ impl ReplayBuffer {
         out.act_c.clear();
         out.rewards.clear();
         out.terminated.clear();
+        out.next_legal.clear();
+        if let Masks::LegalAt(actions) = masks {
+            out.next_legal.resize(n * actions.len(), false);
+        }
         for (k, &i) in idx.iter().enumerate() {
-            if obs_masks {
-                self.store.read(self.obs_slot[i], &mut out.obs, k);
-            } else {
-                self.store.read_tensors(self.obs_slot[i], &mut out.obs, k);
+            let (obs, next) = (self.obs_slot[i], self.next_slot[i]);
+            match masks {
+                Masks::All => {
+                    self.store.read(obs, &mut out.obs, k);
+                    self.store.read(next, &mut out.next, k);
+                }
+                Masks::Next => {
+                    self.store.read_tensors(obs, &mut out.obs, k);
+                    self.store.read(next, &mut out.next, k);
+                }
+                Masks::LegalAt(actions) => {
+                    self.store.read_tensors(obs, &mut out.obs, k);
+                    self.store.read_tensors(next, &mut out.next, k);
+                    let m = actions.len();
+                    let legal = &mut out.next_legal[k * m..(k + 1) * m];
+                    self.store.read_mask_at(next, actions, legal);
+                }
             }
-            self.store.read(self.next_slot[i], &mut out.next, k);
             out.act_d.push(self.act_d[i]);
             out.act_c
                 .extend_from_slice(&self.act_c[i * self.act_dim..(i + 1) * self.act_dim]);
@@ -324,6 +358,17 @@ impl ReplayBuffer {
             out.terminated.push(self.terminated[i]);
         }
     }
+}
+
+/// Which action masks a sample decodes.
+#[derive(Clone, Copy)]
+enum Masks<'a> {
+    /// Both observations' masks.
+    All,
+    /// The next observations' masks.
+    Next,
+    /// The next observations' legality of these actions alone (into `next_legal`).
+    LegalAt(&'a [usize]),
 }
 
 #[cfg(test)]
@@ -449,6 +494,29 @@ mod tests {
             assert_eq!(sample.next.mask(k), want.mask(1));
             assert_eq!(sample.act_c[k], step as f32);
         }
+        // The same transitions with the next masks read at some actions only, across the
+        // mask's first word boundary: the full masks' entries there.
+        let actions = [0, 2, 5, 63, 64, 65, 69];
+        let mut at = ReplaySample::new(&l);
+        let mut idx_at = Vec::new();
+        let rng = &mut RngStream::new(3, "t");
+        rb.sample_legal_at(50, rng, &mut idx_at, &mut at, &actions);
+        assert_eq!(idx_at, idx);
+        assert_eq!(at.next_legal.len(), 50 * actions.len());
+        for k in 0..50 {
+            let full = sample.next.mask(k).unwrap();
+            for (j, &a) in actions.iter().enumerate() {
+                assert_eq!(
+                    at.next_legal[k * actions.len() + j],
+                    full[a],
+                    "row {k}, action {a}"
+                );
+            }
+            for ti in 0..5 {
+                assert_eq!(row_bits(&at.next, ti, k), row_bits(&sample.next, ti, k));
+            }
+        }
+        assert!(at.next_legal.iter().any(|l| !l) && at.next_legal.iter().any(|l| *l));
     }
 
     /// A saved and restored buffer samples exactly what the original samples, and keeps

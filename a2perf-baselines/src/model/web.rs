@@ -44,6 +44,13 @@ pub struct WebArch {
     pub(super) value: Option<Mlp>,
 }
 
+impl WebArch {
+    /// The observation tensors the network reads (indices into its layout).
+    pub(super) fn inputs(&self) -> Vec<usize> {
+        self.idx.to_vec()
+    }
+}
+
 /// How the web network computes the first layer of its element and field MLPs (see the module
 /// documentation). Both paths give the same values up to float rounding.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
