@@ -349,7 +349,9 @@ impl DdqnRun {
     /// padded circuit canvas, the grid's cells, not the 128·128 actions) and the next
     /// observations' masks only (at the scored actions alone). That is exact: the scored actions keep the actions' order,
     /// the others are never legal, so the masked argmax (ties to the lowest action), the
-    /// target values and the gradients are the same as over every action.
+    /// target values and the gradients are the same as over every action. The two passes over
+    /// the next observations feed no backward pass, so they keep no activations
+    /// ([`DiscreteNet::infer_scored`]), the same values.
     fn update(&mut self, net: &mut DiscreteNet, params: &mut [f32], lr: f32) {
         let cfg = &self.cfg;
         let sample = &mut self.sample;
@@ -365,7 +367,7 @@ impl DdqnRun {
                 .sample_legal_at(cfg.batch_size, rng, idx, sample, actions),
         }
         let b = sample.obs.len();
-        net.forward_scored(params, &sample.next);
+        net.infer_scored(params, &sample.next);
         let m = net.logit_width();
         self.next_best.clear();
         for k in 0..b {
@@ -378,7 +380,7 @@ impl DdqnRun {
             self.next_best.push(best.unwrap_or(usize::MAX));
         }
         self.target_net
-            .forward_scored(&self.target_params, &sample.next);
+            .infer_scored(&self.target_params, &sample.next);
         self.targets.clear();
         for (k, &best) in self.next_best.iter().enumerate() {
             let boot = if sample.terminated[k] || best == usize::MAX {

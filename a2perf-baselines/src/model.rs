@@ -96,6 +96,9 @@ struct Ws {
     /// Width of a row of `logits`: the number of actions, or of scored actions after a
     /// [`DiscreteNet::forward_scored`].
     width: usize,
+    /// Whether the last forward pass kept what [`DiscreteNet::backward`] reads (not after
+    /// [`DiscreteNet::infer_scored`]).
+    kept: bool,
 }
 
 /// A network mapping observation batches to logits `[B, n]` (or Q-values) and, optionally, state
@@ -327,7 +330,31 @@ impl DiscreteNet {
     /// is not written. A network that scores every action runs [`forward`](Self::forward).
     /// [`backward`](Self::backward) then takes logit gradients of the same width.
     pub fn forward_scored(&mut self, params: &[f32], batch: &ObsBatch) {
-        self.forward_as(params, batch, true);
+        self.forward_as(params, batch, true, true);
+    }
+
+    /// [`forward_scored`](Self::forward_scored), the same values bit for bit, for a pass that
+    /// no [`backward`](Self::backward) follows (a learner's targets): the circuit network then
+    /// holds one batch row's cell activations at a time, in cache, not the whole batch's (26 MB
+    /// for 256 Ariane pages). A backward pass after it panics.
+    ///
+    /// ```
+    /// use a2perf_baselines::batch::{ObsBatch, ObsLayout};
+    /// use a2perf_baselines::model::{DiscreteArch, DiscreteNet};
+    /// use a2perf_baselines::nn::{Activation, Mlp, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let policy = Mlp::new(&mut alloc, &[2, 3], Activation::Relu);
+    /// let mut net = DiscreteNet::from_arch(DiscreteArch::Flat { policy, value: None }, 3, alloc.len());
+    /// let params = vec![0.1; net.num_params()];
+    /// let mut batch = ObsBatch::new(&ObsLayout::floats(vec![("obs".into(), vec![2])], Some(3)));
+    /// batch.resize(1);
+    /// net.forward_scored(&params, &batch);
+    /// let kept = net.logits().to_vec();
+    /// net.infer_scored(&params, &batch);
+    /// assert_eq!(net.logits(), &kept[..]);
+    /// ```
+    pub fn infer_scored(&mut self, params: &[f32], batch: &ObsBatch) {
+        self.forward_as(params, batch, true, false);
     }
 
     /// Values of the last forward pass, `[B]` (zeros without a value head).
@@ -337,11 +364,11 @@ impl DiscreteNet {
 
     /// Forward pass over every row of `batch`.
     pub fn forward(&mut self, params: &[f32], batch: &ObsBatch) {
-        self.forward_as(params, batch, false);
+        self.forward_as(params, batch, false, true);
     }
 
     /// [`forward`](Self::forward), or [`forward_scored`](Self::forward_scored) when `scored`.
-    fn forward_as(&mut self, params: &[f32], batch: &ObsBatch, scored: bool) {
+    fn forward_as(&mut self, params: &[f32], batch: &ObsBatch, scored: bool, keep: bool) {
         let b = batch.len();
         let n = match &self.arch {
             DiscreteArch::Circuit(c) if scored => c.cells,
@@ -350,6 +377,7 @@ impl DiscreteNet {
         let ws = &mut self.ws;
         ws.batch = b;
         ws.width = n;
+        ws.kept = keep;
         ensure(&mut ws.logits, b * n);
         ensure(&mut ws.values, b);
         ws.values[..b].fill(0.0);
@@ -363,7 +391,7 @@ impl DiscreteNet {
                     ws.values[..b].copy_from_slice(y);
                 }
             }
-            DiscreteArch::Circuit(c) => circuit_forward(c, params, batch, ws, scored),
+            DiscreteArch::Circuit(c) => circuit_forward(c, params, batch, ws, scored, keep),
             DiscreteArch::Web(w) => web::web_forward(w, params, batch, ws),
         }
     }
@@ -381,6 +409,10 @@ impl DiscreteNet {
     ) {
         let b = self.ws.batch;
         let ws = &mut self.ws;
+        assert!(
+            ws.kept,
+            "a backward pass needs a forward that keeps its activations"
+        );
         match &self.arch {
             DiscreteArch::Flat { policy, value } => {
                 policy.backward(params, grads, &ws.x, dlogits, &mut ws.a, None);
@@ -549,8 +581,16 @@ fn circuit_arch(
 pub const CELL_POSITION_INPUTS: usize = 4;
 
 /// The circuit network's forward pass; `scored`: the cells' scores only, `[B, cells]`, even on
-/// the padded canvas.
-fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut Ws, scored: bool) {
+/// the padded canvas; `keep`: keep every row's cell inputs and activations for a backward pass
+/// (else one row's at a time).
+fn circuit_forward(
+    c: &CircuitArch,
+    params: &[f32],
+    batch: &ObsBatch,
+    ws: &mut Ws,
+    scored: bool,
+    keep: bool,
+) {
     let b = batch.len();
     let (nc, ch, k) = (c.cells, c.channels, c.cell_in.out);
     let (pi, (rows, cols)) = (c.position_inputs, c.shape);
@@ -575,8 +615,10 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
             p.copy_from_slice(&[x, y, x.abs(), y.abs()]);
         }
     }
-    ensure(cx, b * nc * stride);
-    ensure(h, b * nc * k);
+    // Without a backward pass to come, every row reuses the first row's place.
+    let kept_rows = if keep { b } else { b.min(1) };
+    ensure(cx, kept_rows * nc * stride);
+    ensure(h, kept_rows * nc * k);
     // The cells' scores: the logits themselves, or laid out on the padded canvas below.
     let direct = c.padded_side == 0 || scored;
     let out: &mut [f32] = if direct {
@@ -592,7 +634,8 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
     // only (the cell-wise GEMM's products and sums run in the same order).
     for r in 0..b {
         let src = &grid[r * ch * nc..(r + 1) * ch * nc];
-        let dst = &mut cx[r * nc * stride..(r + 1) * nc * stride];
+        let at = if keep { r } else { 0 };
+        let dst = &mut cx[at * nc * stride..(at + 1) * nc * stride];
         for chn in 0..ch {
             for i in 0..nc {
                 dst[i * stride + chn] = src[chn * nc + i];
@@ -617,7 +660,7 @@ fn circuit_forward(c: &CircuitArch, params: &[f32], batch: &ObsBatch, ws: &mut W
                 dst[i * stride + ch..(i + 1) * stride].fill(0.0);
             }
         }
-        let hr = &mut h[r * nc * k..(r + 1) * nc * k];
+        let hr = &mut h[at * nc * k..(at + 1) * nc * k];
         c.cell_in.forward(params, dst, nc, hr);
         let gr = &gc[r * k..(r + 1) * k];
         for row in hr.chunks_exact_mut(k) {

@@ -2,7 +2,8 @@
 //! [`ObsBatch::keep_tensors`]) gives that network the same logits, values and gradients, bit for
 //! bit, as a batch holding every tensor: the list of inputs is complete. The learners fill their
 //! minibatches this way (DDQN's replay samples, PPO's rollouts), so a tensor missing from the
-//! list would make this test fail, not a run silently learn from empty rows.
+//! list would make this test fail, not a run silently learn from empty rows. It also checks
+//! [`DiscreteNet::infer_scored`], the pass DDQN's targets take, against the kept-activations one.
 
 mod common;
 
@@ -101,6 +102,14 @@ fn check(id: &str, params: &[(&str, Value)], kind: &str, opts: NetOptions) {
         assert!(same_bits(&g0, &g1), "{id}: gradients");
         assert!(g0.iter().any(|g| *g != 0.0), "{id}: no gradient at all");
     }
+    // A pass no backward follows (`infer_scored`) gives the scored pass's values, bit for bit.
+    for batch in [&full, &kept] {
+        net.forward_scored(&p, batch);
+        let (logits, values) = (net.logits().to_vec(), net.values().to_vec());
+        net.infer_scored(&p, batch);
+        assert!(same_bits(net.logits(), &logits), "{id}: inferred logits");
+        assert!(same_bits(net.values(), &values), "{id}: inferred values");
+    }
     // The kept batch holds nothing of the other tensors.
     for i in (0..layout.tensors.len()).filter(|i| !keep.contains(i)) {
         assert!(
@@ -137,4 +146,24 @@ fn the_web_network_reads_only_its_inputs() {
         "web",
         NetOptions::default(),
     );
+}
+
+#[test]
+#[should_panic(expected = "a backward pass needs a forward that keeps its activations")]
+fn a_backward_pass_after_an_inference_pass_is_refused() {
+    let (spec, obs) = observations(
+        "CircuitTraining-Synthetic-Small-v0",
+        &[("std_cell_placer", Value::Str("none".into()))],
+    );
+    let layout = ObsLayout::from_spec(&spec).unwrap();
+    let mut net = DiscreteNet::for_spec(&spec, &layout, &NetOptions::default(), false).unwrap();
+    let p = net.init_params(&mut RngStream::new(3, "weights"));
+    let mut batch = ObsBatch::new(&layout);
+    for o in &obs {
+        batch.push(o).unwrap();
+    }
+    net.infer_scored(&p, &batch);
+    let d = vec![0.0; net.logits().len()];
+    let mut grads = vec![0.0; p.len()];
+    net.backward(&p, &mut grads, &batch, &d, None);
 }
