@@ -5,7 +5,9 @@
 //!   the masked argmax scans them, and the backward pass gathers the cells' gradients from a
 //!   16,384-wide row — what the learner did before it learned through the scored logits;
 //! - `scored`: [`DiscreteNet::forward_scored`], the argmax over the grid's cells and a
-//!   gradient as wide as the grid — what `Ddqn` does now. Both give the same bits.
+//!   gradient as wide as the grid — what `Ddqn` does, but for its two passes over the next
+//!   observations, which take [`DiscreteNet::infer_scored`] (the same values, fewer bytes
+//!   touched; not timed here). Both give the same bits.
 //!
 //! Each update: the online forward on the next observations and its masked argmax, the target
 //! forward on them, the online forward on the observations, the backward pass and Adam's step.

@@ -347,9 +347,10 @@ impl DdqnRun {
     ///
     /// It reads the networks' scored logits only ([`DiscreteNet::forward_scored`]: on A2Perf's
     /// padded circuit canvas, the grid's cells, not the 128·128 actions) and the next
-    /// observations' masks only (at the scored actions alone). That is exact: the scored actions keep the actions' order,
-    /// the others are never legal, so the masked argmax (ties to the lowest action), the
-    /// target values and the gradients are the same as over every action. The two passes over
+    /// observations' masks only, at the scored actions alone. That is exact: the scored
+    /// actions keep the actions' order, the others are never legal, so the masked argmax (ties
+    /// to the lowest action), the target values and the gradients are the same as over every
+    /// action. The two passes over
     /// the next observations feed no backward pass, so they keep no activations
     /// ([`DiscreteNet::infer_scored`]), the same values.
     fn update(&mut self, net: &mut DiscreteNet, params: &mut [f32], lr: f32) {

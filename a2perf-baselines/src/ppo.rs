@@ -355,17 +355,6 @@ impl PpoRun {
             _ => 0,
         };
         let rows = cfg.num_steps * n_env;
-        let mut ro = Rollout {
-            obs: ObsBatch::default(),
-            act_d: vec![0; rows],
-            act_c: vec![0.0; rows * act_dim],
-            logp: vec![0.0; rows],
-            values: vec![0.0; rows],
-            rewards: vec![0.0; rows],
-            ended: vec![false; rows],
-            adv: vec![0.0; rows],
-            ret: vec![0.0; rows],
-        };
         // Observation batches hold only what the network reads (the circuit network: 2 of 11
         // tensors); normalisation statistics, when kept, see every tensor.
         let keep = match &policy.head {
@@ -379,7 +368,17 @@ impl PpoRun {
             }
             b
         };
-        ro.obs = batch();
+        let mut ro = Rollout {
+            obs: batch(),
+            act_d: vec![0; rows],
+            act_c: vec![0.0; rows * act_dim],
+            logp: vec![0.0; rows],
+            values: vec![0.0; rows],
+            rewards: vec![0.0; rows],
+            ended: vec![false; rows],
+            adv: vec![0.0; rows],
+            ret: vec![0.0; rows],
+        };
         ro.obs.resize(rows);
         let mut raw = batch();
         raw.resize(n_env);
