@@ -1,4 +1,5 @@
-//! Policy inference latency (one observation → one action, one core) and one PPO minibatch update.
+//! Policy inference latency (one observation → one action, one core), one PPO minibatch update,
+//! and a masked softmax gradient right after a GEMM with and without `vzeroupper` in between.
 //!
 //! Run with `cargo bench -p a2perf-baselines --bench inference`.
 
@@ -7,8 +8,9 @@ use std::hint::black_box;
 
 use a2perf_baselines::batch::ObsLayout;
 use a2perf_baselines::model::{DiscreteNet, GaussianArch, NetOptions};
-use a2perf_baselines::nn::MlpWs;
+use a2perf_baselines::nn::dist::masked;
 use a2perf_baselines::nn::optim::Adam;
+use a2perf_baselines::nn::{MlpWs, clear_upper_simd};
 use a2perf_baselines::{Head, NetPolicy};
 use a2perf_core::{ActMode, EnvSpec, Observation, Policy, Registry, RngStream, Space, Value};
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -134,9 +136,51 @@ fn domains(c: &mut Criterion) {
     );
 }
 
+/// One 64×64 faer GEMM, then the softmax gradient of a 12,500-action web page with 3,738 legal
+/// actions (a BC row): over the mask (`log_softmax` + `grad_logp`) and over the legal list
+/// (`grad_logp_legal`), each with the GEMM's upper register halves left in use (`dirty`) and
+/// cleared (`clean`, [`clear_upper_simd`], what the networks' own GEMMs do).
+fn softmax_after_gemm(c: &mut Criterion) {
+    use faer::linalg::matmul::matmul;
+    use faer::{Accum, MatMut, MatRef, Par};
+    let n = 12_500;
+    let mut rng = RngStream::new(2, "logits");
+    let z: Vec<f32> = (0..n).map(|_| (rng.normal() * 3.0) as f32).collect();
+    let mask: Vec<bool> = (0..n).map(|i| i % 10 < 3).collect();
+    let legal: Vec<usize> = (0..n).filter(|&i| mask[i]).collect();
+    let a = vec![0.5f32; 64 * 64];
+    let mut out = vec![0.0f32; 64 * 64];
+    let (mut lp, mut d) = (vec![0.0f32; n], vec![0.0f32; n]);
+    for clean in [false, true] {
+        let mut gemm = || {
+            let am = MatRef::from_row_major_slice(&a, 64, 64);
+            let om = MatMut::from_row_major_slice_mut(&mut out, 64, 64);
+            matmul(om, Accum::Replace, am, am, 1.0f32, Par::Seq);
+            if clean {
+                clear_upper_simd();
+            }
+        };
+        let state = if clean { "clean" } else { "dirty" };
+        c.bench_function(&format!("softmax_after_gemm/mask_{state}"), |b| {
+            b.iter(|| {
+                gemm();
+                masked::log_softmax(black_box(&z), Some(&mask), &mut lp);
+                masked::grad_logp(&lp, 3, -0.01, &mut d);
+            })
+        });
+        c.bench_function(&format!("softmax_after_gemm/legal_{state}"), |b| {
+            b.iter(|| {
+                gemm();
+                masked::grad_logp_legal(black_box(&z), &legal, 3, -0.01, &mut d);
+            })
+        });
+    }
+    black_box(&d);
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(3)).warm_up_time(std::time::Duration::from_secs(1));
-    targets = locomotion, domains
+    targets = locomotion, domains, softmax_after_gemm
 }
 criterion_main!(benches);

@@ -125,7 +125,8 @@ impl Bc {
                 "dataset",
                 ParamKind::Path,
                 Value::Null,
-                "JSON dataset file (see `Dataset::save_json`); pipelines may supply a loader instead",
+                "JSON dataset file (see `Dataset::save_json`), or a dataset directory holding one as \
+                 `samples.json` (`a2perf collect`'s); pipelines may supply a loader instead",
             ),
             ParamSpec::new(
                 "normalize_observations",
@@ -157,7 +158,7 @@ impl Bc {
         let loader = p
             .opt_str("dataset")
             .map_err(hp)?
-            .map(|path| Arc::new(JsonDatasetFile(path.into())) as Arc<dyn DatasetLoader>);
+            .map(|path| Arc::new(JsonDatasetFile(dataset_file(path))) as Arc<dyn DatasetLoader>);
         Ok(Self {
             config: BcConfig {
                 lr: schedule(p, lr)?,
@@ -176,6 +177,17 @@ impl Bc {
     pub fn with_loader(mut self, loader: Arc<dyn DatasetLoader>) -> Self {
         self.loader = Some(loader);
         self
+    }
+}
+
+/// The JSON file `dataset` names: the path itself, or the `samples.json` inside a dataset
+/// directory (what `a2perf collect` writes).
+fn dataset_file(dataset: &str) -> std::path::PathBuf {
+    let path = std::path::PathBuf::from(dataset);
+    if path.is_dir() {
+        path.join("samples.json")
+    } else {
+        path
     }
 }
 
@@ -200,7 +212,7 @@ impl Algorithm for Bc {
         let loader = self.loader.clone().ok_or_else(|| {
             invalid(
                 "dataset",
-                "behavioural cloning needs demonstrations: set `dataset` to a JSON dataset file",
+                "behavioural cloning needs demonstrations: set `dataset` to a JSON dataset file or a dataset directory",
             )
         })?;
         let spec = ctx.make_env(0)?.spec().clone();
@@ -361,6 +373,10 @@ struct BcRun {
     ws: MlpWs,
     dl: Vec<f32>,
     lp: Vec<f32>,
+    /// The discrete minibatch's legal actions, row after row (`legal_rows[k]..legal_rows[k +
+    /// 1]` is row `k`'s): the entries of `dl` a step sets and clears.
+    legal: Vec<usize>,
+    legal_rows: Vec<usize>,
     dlog_std: Vec<f32>,
     total: u64,
     /// Dataset samples drawn so far (BC's budget and curve axis).
@@ -392,6 +408,8 @@ impl BcRun {
             ws: MlpWs::default(),
             dl: Vec::new(),
             lp: Vec::new(),
+            legal: Vec::new(),
+            legal_rows: Vec::new(),
             dlog_std: vec![0.0; act_dim],
             total: ctx.settings().total_env_steps.max(1),
             samples: 0,
@@ -470,27 +488,46 @@ impl BcRun {
     }
 
     /// Cross-entropy −log p(a) of the demonstrated actions under the masked categorical.
+    ///
+    /// With an action mask, the softmax and its gradient visit the legal actions only
+    /// ([`masked::grad_logp_legal`], the same values): a web page leaves most of its 12,500
+    /// actions illegal. `dl` is all zeros between steps (each step clears the entries it set),
+    /// which spares a `[B, n]` fill.
     fn discrete_gradient(&mut self, net: &mut DiscreteNet, params: &[f32], inv: f32) {
-        let (n_actions, b) = (self.n_actions, self.idx.len());
+        let (n, b) = (self.n_actions, self.idx.len());
         net.forward(params, &self.mb);
-        ensure(&mut self.dl, b * n_actions);
-        self.dl[..b * n_actions].fill(0.0);
-        ensure(&mut self.lp, n_actions);
+        ensure(&mut self.dl, b * n);
+        self.legal_rows.clear();
+        self.legal.clear();
         for (k, &r) in self.idx.iter().enumerate() {
-            let l = &mut self.lp[..n_actions];
-            masked::log_softmax(
-                &net.logits()[k * n_actions..(k + 1) * n_actions],
-                self.mb.mask(k),
-                l,
-            );
-            masked::grad_logp(
-                l,
-                self.demos.act_d[r],
-                -inv,
-                &mut self.dl[k * n_actions..(k + 1) * n_actions],
-            );
+            let logits = &net.logits()[k * n..(k + 1) * n];
+            let dl = &mut self.dl[k * n..(k + 1) * n];
+            let action = self.demos.act_d[r];
+            let start = self.legal.len();
+            match self.mb.mask(k) {
+                Some(mask) => {
+                    self.legal
+                        .extend(mask.iter().enumerate().filter(|(_, m)| **m).map(|(i, _)| i));
+                    masked::grad_logp_legal(logits, &self.legal[start..], action, -inv, dl);
+                }
+                None => {
+                    self.legal.extend(0..n);
+                    ensure(&mut self.lp, n);
+                    let l = &mut self.lp[..n];
+                    masked::log_softmax(logits, None, l);
+                    masked::grad_logp(l, action, -inv, dl);
+                }
+            }
+            self.legal_rows.push(start);
         }
+        self.legal_rows.push(self.legal.len());
         net.backward(params, &mut self.grads, &self.mb, &self.dl, None);
+        for k in 0..b {
+            let dl = &mut self.dl[k * n..(k + 1) * n];
+            for &i in &self.legal[self.legal_rows[k]..self.legal_rows[k + 1]] {
+                dl[i] = 0.0;
+            }
+        }
     }
 
     /// Gaussian negative log-likelihood of the demonstrated actions (mean network and
@@ -526,5 +563,23 @@ impl BcRun {
         for (j, v) in self.dlog_std.iter().enumerate() {
             self.grads[g.log_std + j] += v;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::dataset_file;
+
+    #[test]
+    fn a_dataset_directory_names_its_samples_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().to_str().unwrap();
+        assert_eq!(dataset_file(d), dir.path().join("samples.json"));
+        let file = dir.path().join("demos.json");
+        std::fs::write(&file, "{}").unwrap();
+        assert_eq!(dataset_file(file.to_str().unwrap()), file);
+        // A missing path stays as given, so the error names it.
+        let missing = dir.path().join("missing.json");
+        assert_eq!(dataset_file(missing.to_str().unwrap()), missing);
     }
 }

@@ -180,6 +180,32 @@ proptest! {
         prop_assert!((total - 1.0).abs() < 1e-5);
     }
 
+    /// The softmax gradient over the legal actions alone (BC's) is the full one's, bit for bit,
+    /// and leaves the illegal entries alone: logits of any scale, any mask, none legal included.
+    #[test]
+    fn legal_only_softmax_gradient_is_the_full_ones(
+        seed in 0u64..1000, n in 1usize..40, scale in prop::sample::select(vec![0.5f64, 30.0, 300.0]),
+        p_legal in 0.0f64..1.0, coef in -2.0f32..2.0,
+    ) {
+        let mut rng = RngStream::new(seed, "legal");
+        let z = rand_vec(&mut rng, n, scale);
+        let mask: Vec<bool> = (0..n).map(|_| rng.uniform() < p_legal).collect();
+        let legal: Vec<usize> = (0..n).filter(|i| mask[*i]).collect();
+        let a = rng.index(n);
+        let start: Vec<f32> = rand_vec(&mut rng, n, 1.0);
+        let mut lp = vec![0.0; n];
+        let some = masked::log_softmax(&z, Some(&mask), &mut lp);
+        let mut full = start.clone();
+        masked::grad_logp(&lp, a, coef, &mut full);
+        let mut fast = start.clone();
+        prop_assert_eq!(masked::grad_logp_legal(&z, &legal, a, coef, &mut fast), some);
+        prop_assert_eq!(fast.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            full.iter().map(|v| v.to_bits()).collect::<Vec<_>>());
+        for i in (0..n).filter(|i| !mask[*i]) {
+            prop_assert_eq!(fast[i].to_bits(), start[i].to_bits());
+        }
+    }
+
     #[test]
     fn gaussian_gradients(seed in 0u64..1000, d in 1usize..5) {
         let mut rng = RngStream::new(seed, "gauss");

@@ -17,14 +17,13 @@
 //! has a zero encoding, so its logits are the other side's type term alone.
 
 use a2perf_core::EnvSpec;
-use faer::linalg::matmul::matmul;
-use faer::{Accum, MatMut, MatRef, Par};
+use faer::{Accum, MatMut, MatRef};
 use serde::{Deserialize, Serialize};
 
 use super::{DiscreteArch, NetOptions, Ws};
 use crate::batch::{ObsBatch, ObsLayout};
 use crate::nn::embed::Embedding;
-use crate::nn::{Activation, Linear, Mlp, MlpWs, ParamAlloc, ensure};
+use crate::nn::{Activation, Linear, Mlp, MlpWs, ParamAlloc, ensure, gemm};
 
 /// Web navigation DOM–profile network (see the module table).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -211,7 +210,7 @@ impl Projection {
         for (s, p) in p.chunks_exact_mut(v * l).enumerate() {
             let p = MatMut::from_row_major_slice_mut(p, v, l);
             let ws = w.submatrix(0, s * d, l, d);
-            matmul(p, Accum::Replace, e, ws.transpose(), 1.0f32, Par::Seq);
+            gemm(p, Accum::Replace, e, ws.transpose());
         }
         let base = slots * d;
         for (k, row) in dense.chunks_exact_mut(l).enumerate() {
@@ -318,16 +317,9 @@ fn projected_backward(
         let dps = MatRef::from_row_major_slice(&dp[s * v * l..(s + 1) * v * l], v, l);
         let gw = MatMut::from_row_major_slice_mut(&mut grads[layer.w_range()], l, inp);
         let gws = gw.submatrix_mut(0, s * d, l, d);
-        matmul(gws, Accum::Add, dps.transpose(), e, 1.0f32, Par::Seq);
+        gemm(gws, Accum::Add, dps.transpose(), e);
         let ge = MatMut::from_row_major_slice_mut(&mut grads[e_range.clone()], v, d);
-        matmul(
-            ge,
-            Accum::Add,
-            dps,
-            w.submatrix(0, s * d, l, d),
-            1.0f32,
-            Par::Seq,
-        );
+        gemm(ge, Accum::Add, dps, w.submatrix(0, s * d, l, d));
     }
 }
 
@@ -636,7 +628,7 @@ pub(super) fn web_forward(w: &WebArch, params: &[f32], batch: &ObsBatch, ws: &mu
             let fm = MatRef::from_row_major_slice(&fe[f0 * l..f1 * l], nfr, l);
             let em = MatRef::from_row_major_slice(&ee[e0 * l..e1 * l], ner, l);
             let sm = MatMut::from_row_major_slice_mut(&mut s[..nfr * ner], nfr, ner);
-            matmul(sm, Accum::Replace, fm, em.transpose(), 1.0f32, Par::Seq);
+            gemm(sm, Accum::Replace, fm, em.transpose());
         }
         for (j, &(_, e)) in active_e[e0..e1].iter().enumerate() {
             let tej = &te[(e0 + j) * 2..(e0 + j) * 2 + 2];
@@ -764,9 +756,9 @@ pub(super) fn web_backward(
             let fm = MatRef::from_row_major_slice(&fe[f0 * l..f1 * l], nfr, l);
             let em = MatRef::from_row_major_slice(&ee[e0 * l..e1 * l], ner, l);
             let dfm = MatMut::from_row_major_slice_mut(&mut dfe[f0 * l..f1 * l], nfr, l);
-            matmul(dfm, Accum::Replace, dsm, em, 1.0f32, Par::Seq);
+            gemm(dfm, Accum::Replace, dsm, em);
             let dem = MatMut::from_row_major_slice_mut(&mut dee[e0 * l..e1 * l], ner, l);
-            matmul(dem, Accum::Replace, dsm.transpose(), fm, 1.0f32, Par::Seq);
+            gemm(dem, Accum::Replace, dsm.transpose(), fm);
         }
         ensure(&mut dtmp, (b * 2).max(caf).max(cae) * l);
         if let (Some(v), Some(dv)) = (&w.value, dvalues) {

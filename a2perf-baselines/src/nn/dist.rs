@@ -106,6 +106,56 @@ pub mod masked {
             .sum()
     }
 
+    /// [`log_softmax`] over the legal actions `legal` (in increasing order) followed by
+    /// [`grad_logp`], touching only the legal entries: `dlogits[i] += coef · (onehot(action) −
+    /// p_i)` for each legal `i`, the same values bit for bit (the sums run in the same order),
+    /// without a pass over the illegal ones. Returns `false`, leaving `dlogits` as it was, when
+    /// nothing is legal.
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::dist::masked;
+    /// let (z, mask) = ([0.5, 3.0, -1.0, 2.0], [true, false, true, true]);
+    /// let mut lp = [0.0; 4];
+    /// masked::log_softmax(&z, Some(&mask), &mut lp);
+    /// let mut full = [0.0; 4];
+    /// masked::grad_logp(&lp, 3, -0.5, &mut full);
+    /// let legal: Vec<usize> = (0..4).filter(|&i| mask[i]).collect();
+    /// let mut fast = [0.0; 4];
+    /// assert!(masked::grad_logp_legal(&z, &legal, 3, -0.5, &mut fast));
+    /// assert_eq!(fast, full);
+    /// ```
+    pub fn grad_logp_legal(
+        logits: &[f32],
+        legal: &[usize],
+        action: usize,
+        coef: f32,
+        dlogits: &mut [f32],
+    ) -> bool {
+        let mut max = f32::NEG_INFINITY;
+        for &i in legal {
+            let z = logits[i];
+            if z > max {
+                max = z;
+            }
+        }
+        if max == f32::NEG_INFINITY {
+            return false;
+        }
+        let mut sum = 0.0f64;
+        for &i in legal {
+            sum += f64::from((logits[i] - max).exp());
+        }
+        let lse = max + sum.ln() as f32;
+        for &i in legal {
+            let l = logits[i] - lse;
+            if l > f32::NEG_INFINITY {
+                let onehot = if i == action { 1.0 } else { 0.0 };
+                dlogits[i] += coef * (onehot - l.exp());
+            }
+        }
+        true
+    }
+
     /// `dlogits += coef · ∂ log p(a) / ∂ logits` = `coef·(onehot(a) − p)` on legal entries.
     pub fn grad_logp(logp: &[f32], action: usize, coef: f32, dlogits: &mut [f32]) {
         for (i, (&l, d)) in logp.iter().zip(dlogits.iter_mut()).enumerate() {

@@ -15,9 +15,41 @@ pub mod optim;
 pub mod tanh;
 
 use a2perf_core::RngStream;
-use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 use serde::{Deserialize, Serialize};
+
+/// `dst = lhs·rhs` ([`Accum::Replace`]) or `dst += lhs·rhs` ([`Accum::Add`]) on this thread:
+/// faer's GEMM, then [`clear_upper_simd`], as its kernels return with the upper halves of the
+/// 256-bit registers in use. Every network here multiplies through it.
+pub(crate) fn gemm(dst: MatMut<'_, f32>, accum: Accum, lhs: MatRef<'_, f32>, rhs: MatRef<'_, f32>) {
+    faer::linalg::matmul::matmul(dst, accum, lhs, rhs, 1.0f32, Par::Seq);
+    clear_upper_simd();
+}
+
+/// Marks the upper halves of the 256-bit registers unused (`vzeroupper`) when the CPU has AVX;
+/// does nothing elsewhere. Values are untouched. Scalar float code compiled for baseline
+/// x86-64 (legacy SSE encoding) that calls a VEX-encoded libm routine (`expf`, `logf`) while
+/// those halves are in use pays a state transition at each call and return on CPUs that save
+/// and restore them: measured here, a masked softmax over 12,500 logits right after a faer
+/// GEMM ran about 10× slower than after `vzeroupper`.
+///
+/// ```
+/// a2perf_baselines::nn::clear_upper_simd();
+/// ```
+#[inline]
+pub fn clear_upper_simd() {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX (checked just above), all `zero_upper` needs.
+        unsafe { zero_upper() }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn zero_upper() {
+    std::arch::x86_64::_mm256_zeroupper();
+}
 
 /// Grows `buf` to at least `len` elements (never shrinks, so steady state allocates nothing).
 pub(crate) fn ensure(buf: &mut Vec<f32>, len: usize) {
@@ -109,7 +141,7 @@ impl Linear {
         let xm = MatRef::from_row_major_slice(&x[..batch * self.inp], batch, self.inp);
         let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
         let ym = MatMut::from_row_major_slice_mut(y, batch, self.out);
-        matmul(ym, Accum::Add, xm, wm.transpose(), 1.0f32, Par::Seq);
+        gemm(ym, Accum::Add, xm, wm.transpose());
     }
 
     /// Accumulates `dW += dyᵀ x`, `db += Σ dy` into `grads`, and writes `dx = dy W` when asked.
@@ -151,7 +183,7 @@ impl Linear {
                 self.out,
                 self.inp,
             );
-            matmul(gw, Accum::Add, dym.transpose(), xm, 1.0f32, Par::Seq);
+            gemm(gw, Accum::Add, dym.transpose(), xm);
         }
         let gb = &mut grads[shift(self.b_range())];
         for row in dy.chunks_exact(self.out) {
@@ -174,7 +206,7 @@ impl Linear {
         let dym = MatRef::from_row_major_slice(&dy[..batch * self.out], batch, self.out);
         let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
         let dxm = MatMut::from_row_major_slice_mut(&mut dx[..batch * self.inp], batch, self.inp);
-        matmul(dxm, Accum::Replace, dym, wm, 1.0f32, Par::Seq);
+        gemm(dxm, Accum::Replace, dym, wm);
     }
 }
 
