@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use a2perf_core::{
     Action, Algorithm, Control, EnvSpec, ParamKind, ParamSpec, Params, Policy, RngStream, RunError,
-    TrainingContext, Value,
+    TrainingContext, Value, hash::Fnv1a,
 };
 
 use crate::batch::{ObsBatch, ObsLayout};
@@ -32,13 +32,8 @@ const STATE_VERSION: u32 = 2;
 /// resumed on a dataset that changed: tensor by tensor, each one's values over every sample
 /// (floats as bits, integers as `u32`), then every sample's action mask, then the actions.
 fn fingerprint(store: &ObsStore, layout: &ObsLayout, act_d: &[usize], act_c: &[f32]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |x: u64| {
-        for b in x.to_le_bytes() {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01B3);
-        }
-    };
+    let mut h = Fnv1a::new();
+    let mut eat = |x: u64| h.write_u64(x);
     let n = act_d.len();
     let mut row = ObsBatch::new(layout);
     row.resize(1);
@@ -68,7 +63,7 @@ fn fingerprint(store: &ObsStore, layout: &ObsLayout, act_d: &[usize], act_c: &[f
     for a in act_c {
         eat(u64::from(a.to_bits()));
     }
-    h
+    h.finish()
 }
 
 /// BC hyperparameters.

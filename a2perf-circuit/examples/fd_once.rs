@@ -23,13 +23,13 @@ fn run(name: &str, netlist: &Netlist, placement: &Placement, settings: CostSetti
     place_std_cells(&mut cost, &schedule, &mut FdScratch::default());
     let c = cost.costs();
     // FNV-1a over the bit patterns of all coordinates: any change in the placement shows.
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut h = a2perf_core::hash::Fnv1a::new();
     for i in 0..cost.num_nodes() {
         let (x, y) = cost.position(i);
-        for v in [x, y] {
-            h = (h ^ v.to_bits()).wrapping_mul(0x100_0000_01b3);
-        }
+        h.write_u64(x.to_bits());
+        h.write_u64(y.to_bits());
     }
+    let h = h.finish();
     println!(
         "{name:<18} proxy {:.12e}  wl {:.12e}  density {:.12e}  congestion {:.12e}  hash {h:016x}",
         c.proxy_cost, c.wirelength_cost, c.density_cost, c.congestion_cost

@@ -282,12 +282,7 @@ pub struct Netlist {
 
 /// FNV-1a 64 of bytes as 16 hex digits (stable provenance hash).
 pub fn content_hash(bytes: &[u8]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in bytes {
-        h ^= u64::from(*b);
-        h = h.wrapping_mul(0x0000_0100_0000_01B3);
-    }
-    format!("{h:016x}")
+    format!("{:016x}", a2perf_core::hash::fnv1a64(bytes))
 }
 
 /// Reads a file, gunzipping when it starts with the gzip magic.

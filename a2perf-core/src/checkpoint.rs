@@ -14,6 +14,7 @@
 //! | *P* | the payload |
 
 use crate::error::PolicyError;
+use crate::hash::Fnv1a;
 
 /// A serialised policy: which algorithm made it, its payload format version and the bytes.
 ///
@@ -33,12 +34,11 @@ const CHECKPOINT_MAGIC: &[u8; 8] = b"A2PERFCK";
 const CONTAINER_VERSION: u32 = 1;
 
 fn fnv1a64(parts: &[&[u8]]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in parts.iter().flat_map(|p| p.iter()) {
-        h ^= u64::from(*b);
-        h = h.wrapping_mul(0x0000_0100_0000_01B3);
+    let mut h = Fnv1a::new();
+    for p in parts {
+        h.write(p);
     }
-    h
+    h.finish()
 }
 
 /// The checkpoint container around a payload given in parts (concatenated), so that large

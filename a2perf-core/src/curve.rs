@@ -7,9 +7,11 @@ use serde::{Deserialize, Serialize};
 pub struct CurvePoint {
     /// Environment steps consumed so far.
     pub env_steps: u64,
-    /// Mean evaluation return (greedy policy).
+    /// Mean evaluation return (greedy policy); NaN when a reward was (written as `null`).
+    #[serde(deserialize_with = "crate::results::f64_or_nan")]
     pub mean_return: f64,
     /// Standard deviation of the evaluation returns.
+    #[serde(deserialize_with = "crate::results::f64_or_nan")]
     pub std_return: f64,
     /// Seconds since training started (not deterministic; excluded from equality checks of curves).
     pub wall_seconds: f64,

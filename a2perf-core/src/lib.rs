@@ -13,7 +13,8 @@
 //!   and SIGTERM reaching the training runs.
 //! - [`Meter`]: anything that measures a phase, composable with [`MeterSet`].
 //! - [`Registry`]: environment ids and algorithm names mapped to typed constructors.
-//! - [`RngStream`]: every random number, keyed by (seed, purpose).
+//! - [`RngStream`]: every random number, keyed by (seed, purpose); [`hash`]: FNV-1a, the one
+//!   stable hash of provenance records, checksums and purpose keys.
 //! - [`config`]: RON experiment files with includes, overrides and precise errors.
 //! - [`results`]: atomic result files and resumable run directories.
 //! - [`resume`]: resume points, so that an interrupted training run continues exactly where it
@@ -43,6 +44,7 @@ pub mod crew;
 pub mod curve;
 pub mod env;
 pub mod error;
+pub mod hash;
 pub mod meter;
 pub mod policy;
 pub mod registry;

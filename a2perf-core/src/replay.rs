@@ -125,7 +125,9 @@ pub struct EpisodeLog {
     pub seed: u64,
     /// Every action, in order.
     pub actions: ActionLog,
-    /// The reward after each action, as observed (diagnostic: replay recomputes them).
+    /// The reward after each action, as observed (diagnostic: replay recomputes them). A NaN
+    /// reward is written as `null` (JSON has no NaN) and read back as NaN.
+    #[serde(deserialize_with = "crate::results::vec_f64_or_nan")]
     pub rewards: Vec<f64>,
 }
 
@@ -199,14 +201,15 @@ pub struct Difference {
 }
 
 impl Replayed {
-    /// The first step whose reward (compared bit for bit) or existence differs from the log.
+    /// The first step whose reward (compared bit for bit; any NaN matches any NaN, since a log
+    /// read from JSON keeps no NaN's bits) or existence differs from the log.
     pub fn first_difference(&self, log: &EpisodeLog) -> Option<Difference> {
         let n = self.rewards.len().max(log.rewards.len());
         (0..n).find_map(|step| {
             let expected = log.rewards.get(step).copied();
             let found = self.rewards.get(step).copied();
-            let same =
-                matches!((expected, found), (Some(a), Some(b)) if a.to_bits() == b.to_bits());
+            let same = matches!((expected, found),
+                (Some(a), Some(b)) if a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()));
             (!same).then_some(Difference {
                 step,
                 expected,
@@ -531,5 +534,30 @@ mod tests {
                 f32::MIN_POSITIVE
             ]))
         );
+    }
+
+    #[test]
+    fn a_nan_reward_round_trips_through_json_and_replays() {
+        // 0/0 is a negative NaN on x86; the log read back holds the positive default NaN.
+        let zero = std::hint::black_box(0.0_f64);
+        let mut log = EpisodeLog::new(0);
+        log.push(&Action::Discrete(1), zero / zero).unwrap();
+        log.push(&Action::Discrete(0), 0.5).unwrap();
+        let json = serde_json::to_string(&log).unwrap();
+        assert!(json.contains("[null,0.5]"), "{json}");
+        let back: EpisodeLog = serde_json::from_str(&json).unwrap();
+        assert!(back.rewards[0].is_nan());
+        assert_eq!(back.rewards[1], 0.5);
+        let replayed = Replayed {
+            episode_return: f64::NAN,
+            length: 2,
+            rewards: log.rewards.clone(),
+        };
+        assert_eq!(replayed.first_difference(&back), None);
+        let other = Replayed {
+            rewards: vec![1.0, 0.5],
+            ..replayed
+        };
+        assert_eq!(other.first_difference(&back).map(|d| d.step), Some(0));
     }
 }

@@ -127,6 +127,46 @@ pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, Results
     })
 }
 
+/// Reads a `f64` written by [`write_json_atomic`] that may have been NaN or infinite: JSON has
+/// no such numbers, so they are written as `null`, and this reads `null` back as NaN (an
+/// infinity's sign is not kept). For fields a run's numbers go into unchecked (returns and
+/// their summaries), so that a run whose environment paid a NaN reward stays readable:
+/// `#[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]`.
+///
+/// ```
+/// #[derive(serde::Serialize, serde::Deserialize)]
+/// struct Point {
+///     #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
+///     mean_return: f64,
+/// }
+/// let text = serde_json::to_string(&Point { mean_return: f64::NAN }).unwrap();
+/// assert_eq!(text, r#"{"mean_return":null}"#);
+/// let back: Point = serde_json::from_str(&text).unwrap();
+/// assert!(back.mean_return.is_nan());
+/// ```
+pub fn f64_or_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// [`f64_or_nan`] for every element of a list.
+///
+/// ```
+/// #[derive(serde::Deserialize)]
+/// struct Returns {
+///     #[serde(deserialize_with = "a2perf_core::results::vec_f64_or_nan")]
+///     returns: Vec<f64>,
+/// }
+/// let r: Returns = serde_json::from_str(r#"{"returns":[1.5,null]}"#).unwrap();
+/// assert_eq!(r.returns[0], 1.5);
+/// assert!(r.returns[1].is_nan());
+/// ```
+pub fn vec_f64_or_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+    Ok(Vec::<Option<f64>>::deserialize(d)?
+        .into_iter()
+        .map(|v| v.unwrap_or(f64::NAN))
+        .collect())
+}
+
 /// State of a run directory.
 ///
 /// ```

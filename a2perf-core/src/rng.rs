@@ -80,12 +80,7 @@ fn mix64(mut z: u64) -> u64 {
 /// Stable hash of a purpose string (FNV-1a folded through SplitMix64); never changes between
 /// releases, so recorded results stay reproducible.
 fn purpose_key(purpose: &str) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in purpose.as_bytes() {
-        h ^= u64::from(*b);
-        h = h.wrapping_mul(0x0000_0100_0000_01B3);
-    }
-    mix64(h)
+    mix64(crate::hash::fnv1a64(purpose.as_bytes()))
 }
 
 impl RngStream {

@@ -139,13 +139,8 @@ pub struct VecEnvSnapshot {
 /// mask. A tensor's type is part of the hash, so an `int32` observation never matches a hash
 /// taken when the same ids were `float32`.
 pub fn observation_hash(obs: &Observation) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |x: u64| {
-        for b in x.to_le_bytes() {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01B3);
-        }
-    };
+    let mut h = crate::hash::Fnv1a::new();
+    let mut eat = |x: u64| h.write_u64(x);
     for t in &obs.tensors {
         eat(t.data.len() as u64);
         eat(t.dtype() as u64);
@@ -160,7 +155,7 @@ pub fn observation_hash(obs: &Observation) -> u64 {
             eat(u64::from(*legal));
         }
     }
-    h
+    h.finish()
 }
 
 /// N environments stepped together, with automatic reset.

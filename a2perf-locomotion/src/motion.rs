@@ -280,25 +280,19 @@ impl MotionClip {
 
     /// FNV-1a hash of the frame data and settings (for provenance records).
     pub fn content_hash(&self) -> String {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        let mut eat = |bytes: &[u8]| {
-            for b in bytes {
-                h ^= u64::from(*b);
-                h = h.wrapping_mul(0x0100_0000_01b3);
-            }
-        };
-        eat(&self.frame_duration.to_le_bytes());
-        eat(&[
+        let mut h = a2perf_core::hash::Fnv1a::new();
+        h.write(&self.frame_duration.to_le_bytes());
+        h.write(&[
             self.loop_mode as u8,
             u8::from(self.cycle_offset_position),
             u8::from(self.cycle_offset_rotation),
         ]);
         for f in &self.frames {
             for v in f {
-                eat(&v.to_le_bytes());
+                h.write(&v.to_le_bytes());
             }
         }
-        format!("{h:016x}")
+        format!("{:016x}", h.finish())
     }
 
     fn frame(&self, i: usize) -> MotionFrame {

@@ -55,6 +55,7 @@ pub struct CheckpointEval {
     /// Greedy returns.
     pub returns: Summary,
     /// Every return.
+    #[serde(deserialize_with = "a2perf_core::results::vec_f64_or_nan")]
     pub rollout_returns: Vec<f64>,
     /// Energy of the whole training run (kWh), when measured.
     pub total_training_energy_kwh: Option<f64>,

@@ -129,6 +129,7 @@ pub struct DatasetInfo {
     /// Steps (samples).
     pub steps: usize,
     /// Mean return of the episodes.
+    #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
     pub mean_return: f64,
     /// Checkpoints the episodes were drawn from.
     pub checkpoints: Vec<PathBuf>,

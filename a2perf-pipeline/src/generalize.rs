@@ -139,7 +139,17 @@ pub fn generalize_run_with(
         })();
         match outcome {
             Ok(returns) => {
-                result.mean_return = Some(returns.iter().sum::<f64>() / returns.len() as f64);
+                let mean = returns.iter().sum::<f64>() / returns.len() as f64;
+                if mean.is_finite() {
+                    result.mean_return = Some(mean);
+                } else {
+                    // JSON has no NaN: say why there is no mean rather than write one that
+                    // reads back as a task that could not be run.
+                    result.error = Some(format!(
+                        "the mean return is not finite ({mean}): the environment paid a \
+                         non-finite reward"
+                    ));
+                }
                 result.returns = returns;
             }
             Err(e @ PipelineError::Rollout { .. }) if policies.errors_are_fatal() => {

@@ -177,6 +177,7 @@ pub struct InferenceResults {
     /// Greedy rollouts run.
     pub episodes: usize,
     /// Return of every rollout (undiscounted sum of rewards).
+    #[serde(deserialize_with = "a2perf_core::results::vec_f64_or_nan")]
     pub rollout_returns: Vec<f64>,
     /// Summary of `rollout_returns`.
     pub returns: Summary,
@@ -208,10 +209,13 @@ pub struct TaskResult {
     /// Parameters that differ from the id's defaults.
     pub params: BTreeMap<String, Value>,
     /// Return of every rollout.
+    #[serde(deserialize_with = "a2perf_core::results::vec_f64_or_nan")]
     pub returns: Vec<f64>,
-    /// Mean return (`None` when the task could not be run; see `error`).
+    /// Mean return (`None` when the task could not be run or the mean is not finite; see
+    /// `error`).
     pub mean_return: Option<f64>,
-    /// Why the policy could not be run on this task (e.g. its observation does not fit).
+    /// Why the policy could not be run on this task (e.g. its observation does not fit), or
+    /// why it has no mean return.
     pub error: Option<String>,
 }
 

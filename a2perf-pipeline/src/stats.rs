@@ -9,24 +9,32 @@ use serde::{Deserialize, Serialize};
 pub use a2perf_metrics::numeric::mean_sequential as mean;
 
 /// Summary of a sample: count, mean, population standard deviation (NumPy's default, as the
-/// original harness), median, p90, p99, min and max. Empty samples give `count = 0` and NaNs.
+/// original harness), median, p90, p99, min and max. Empty samples give `count = 0` and NaNs,
+/// and so does a NaN among the values; files hold them as `null` and read them back as NaN.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
     /// Number of values.
     pub count: usize,
     /// Mean.
+    #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
     pub mean: f64,
     /// Population standard deviation (ddof = 0).
+    #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
     pub std: f64,
     /// Median (linear interpolation).
+    #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
     pub median: f64,
     /// 90th percentile (linear interpolation).
+    #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
     pub p90: f64,
     /// 99th percentile (linear interpolation).
+    #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
     pub p99: f64,
     /// Minimum.
+    #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
     pub min: f64,
     /// Maximum.
+    #[serde(deserialize_with = "a2perf_core::results::f64_or_nan")]
     pub max: f64,
 }
 

@@ -775,14 +775,11 @@ impl WebNavEnv {
 
 fn pool_hash(pool: &[Design]) -> u64 {
     // FNV-1a over the canonical JSON, so the hash is stable across builds and platforms.
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut h = a2perf_core::hash::Fnv1a::new();
     for d in pool {
-        for b in d.to_a2perf_json().to_string().bytes() {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01B3);
-        }
+        h.write(d.to_a2perf_json().to_string().as_bytes());
     }
-    h
+    h.finish()
 }
 
 const INFO_KEYS: [&str; 5] = [

@@ -418,12 +418,11 @@ pub fn env_params(pairs: &[(&str, Value)]) -> BTreeMap<String, Value> {
 /// FNV-1a (64-bit) over the concatenation of `parts`: a short fingerprint of training output
 /// for the tests that pin it.
 pub fn fingerprint<'a>(parts: impl IntoIterator<Item = &'a [u8]>) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in parts.into_iter().flatten() {
-        h ^= u64::from(*b);
-        h = h.wrapping_mul(0x0000_0100_0000_01B3);
+    let mut h = a2perf_core::hash::Fnv1a::new();
+    for p in parts {
+        h.write(p);
     }
-    h
+    h.finish()
 }
 
 /// Whether this machine should reproduce the pinned training fingerprints bit for bit. They

@@ -163,7 +163,7 @@ pub(super) struct Seeds {
 
 impl Seeds {
     /// A metric with one value per run: its statistics over the seeds, or missing (saying how
-    /// many runs have it) when any run lacks it. `notes` (deduplicated) say how it was obtained.
+    /// many runs have it) when any run lacks it or has it not finite (a NaN reward). `notes` (deduplicated) say how it was obtained.
     pub(super) fn metric(
         &mut self,
         metric: MetricValue,
@@ -177,6 +177,13 @@ impl Seeds {
             return m.missing(format!("{missing_why} ({have} of {} runs)", values.len()));
         }
         let v: Vec<f64> = values.into_iter().flatten().collect();
+        let not_finite = v.iter().filter(|x| !x.is_finite()).count();
+        if not_finite > 0 {
+            return m.missing(format!(
+                "not finite for these runs ({not_finite} of {} runs)",
+                v.len()
+            ));
+        }
         let stats = OverSeeds::of(&v, self.reps, &mut self.rng);
         m.mean = Some(stats.mean);
         m.std = Some(stats.std);
