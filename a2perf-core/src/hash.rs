@@ -30,18 +30,6 @@ impl Fnv1a {
         Self(Self::OFFSET_BASIS)
     }
 
-    /// Continues a hash whose value so far is `state` (a [`finish`](Self::finish)ed value).
-    ///
-    /// ```
-    /// use a2perf_core::hash::{Fnv1a, fnv1a64};
-    /// let mut h = Fnv1a::from_state(fnv1a64(b"a2"));
-    /// h.write(b"perf");
-    /// assert_eq!(h.finish(), fnv1a64(b"a2perf"));
-    /// ```
-    pub const fn from_state(state: u64) -> Self {
-        Self(state)
-    }
-
     /// Feeds `bytes`.
     #[inline]
     pub fn write(&mut self, bytes: &[u8]) {

@@ -38,6 +38,9 @@ impl Category {
     }
 }
 
+/// The note of a metric whose value is NaN or infinite for the group's runs.
+pub(crate) const NOT_FINITE: &str = "not finite for these runs";
+
 /// One metric of one (task, algorithm) group.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MetricValue {
@@ -95,7 +98,7 @@ impl MetricValue {
             self.mean = Some(value);
             self.std = spread.filter(|s| s.is_finite());
         } else {
-            self.note = Some("not finite for these runs".into());
+            self.note = Some(NOT_FINITE.into());
         }
         self
     }

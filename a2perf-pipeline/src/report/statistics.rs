@@ -11,7 +11,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use a2perf_core::RngStream;
 use a2perf_metrics::{bootstrap, numeric, rliable};
 
-use super::model::{GroupReport, ImprovementEntry, IqmEntry, MetricValue, ReportOptions};
+use super::model::{
+    GroupReport, ImprovementEntry, IqmEntry, MetricValue, NOT_FINITE, ReportOptions,
+};
 
 /// Mean, sample standard deviation and 95% bootstrap interval of the mean of one metric over
 /// a group's seeds.
@@ -163,7 +165,8 @@ pub(super) struct Seeds {
 
 impl Seeds {
     /// A metric with one value per run: its statistics over the seeds, or missing (saying how
-    /// many runs have it) when any run lacks it or has it not finite (a NaN reward). `notes` (deduplicated) say how it was obtained.
+    /// many runs have it) when any run lacks it or has it not finite (a NaN reward). `notes`
+    /// (deduplicated) say how it was obtained.
     pub(super) fn metric(
         &mut self,
         metric: MetricValue,
@@ -179,10 +182,7 @@ impl Seeds {
         let v: Vec<f64> = values.into_iter().flatten().collect();
         let not_finite = v.iter().filter(|x| !x.is_finite()).count();
         if not_finite > 0 {
-            return m.missing(format!(
-                "not finite for these runs ({not_finite} of {} runs)",
-                v.len()
-            ));
+            return m.missing(format!("{NOT_FINITE} ({not_finite} of {} runs)", v.len()));
         }
         let stats = OverSeeds::of(&v, self.reps, &mut self.rng);
         m.mean = Some(stats.mean);
