@@ -62,6 +62,11 @@ pub struct SubmitArgs {
     /// Seeds, replacing the config's: `0..10`, `0..=9`, `1,3,5`.
     #[arg(long)]
     pub seeds: Option<String>,
+    /// Seeds run at the same time (0 = one per CPU). Each phase of a seed is a process of its
+    /// own, so its meters (RAM, energy, time) are its alone, as with `a2perf run --isolate`;
+    /// only the machine is shared. Results are the same as one seed at a time.
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub jobs: usize,
     /// Report directory (default: `report/` in the submission's experiment directory).
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
@@ -354,65 +359,40 @@ pub fn submit(registry: &Registry, args: &SubmitArgs) -> Result<()> {
         env!("CARGO_PKG_VERSION"),
         folder.display()
     );
-    let mut failures = Vec::new();
-    let mut checked = false;
-    for (seed, plan) in &plans {
-        let run_dir = plan.run_dir(*seed);
-        let task = serde_json::json!({
-            "participant_dir": folder,
-            "participant_args": participant_args,
-            "output": output,
-            "experiment": plan.name,
-            "config": config,
-            "cwd": cwd,
-            "set": args.set,
-            "algorithm": name,
-            "seed": seed,
-            "run_dir": run_dir,
-            "code_dir": run_dir.join(SUBMISSION_CODE_DIR),
-            "files_dir": run_dir.join(SUBMISSION_FILES_DIR),
-            "env_id": plan.task.env_id,
-            "env_params": plan.task.env_params,
-            "training": plan.training,
-            "harness": harness,
-        });
-        if !checked {
-            phase(&python, &folder, &task, "check")?;
-            checked = true;
-        }
-        let complete = run_dir.exists() && LoadedRun::open(&run_dir)?.is_complete()?;
-        if complete {
-            eprintln!("{}: already trained (complete)", run_dir.display());
-        } else {
-            eprintln!("== train {} (seed {seed})", folder.display());
-            if !phase(&python, &folder, &task, "train")? {
-                eprintln!(
-                    "{}: training raised (traceback above: train(), or the evaluation of its \
-                     final policy when it logged none); the run is marked failed",
-                    run_dir.display()
-                );
-                failures.push(format!("{}: training raised", run_dir.display()));
-                continue;
-            }
-        }
-        for (what, file) in [
-            ("infer", INFERENCE_FILE),
-            ("generalize", GENERALIZATION_FILE),
-        ] {
-            if complete && run_dir.join(file).is_file() {
-                continue;
-            }
-            eprintln!("== {what} {}", run_dir.display());
-            if !phase(&python, &folder, &task, what)? {
-                failures.push(format!(
-                    "{}: {what}: the participant's inference code raised",
-                    run_dir.display()
-                ));
-                break;
-            }
-        }
-        print_results(&run_dir)?;
-    }
+    let tasks: Vec<(u64, PathBuf, serde_json::Value)> = plans
+        .iter()
+        .map(|(seed, plan)| {
+            let run_dir = plan.run_dir(*seed);
+            let task = serde_json::json!({
+                "participant_dir": folder,
+                "participant_args": participant_args,
+                "output": output,
+                "experiment": plan.name,
+                "config": config,
+                "cwd": cwd,
+                "set": args.set,
+                "algorithm": name,
+                "seed": seed,
+                "run_dir": run_dir,
+                "code_dir": run_dir.join(SUBMISSION_CODE_DIR),
+                "files_dir": run_dir.join(SUBMISSION_FILES_DIR),
+                "env_id": plan.task.env_id,
+                "env_params": plan.task.env_params,
+                "training": plan.training,
+                "harness": harness,
+            });
+            (*seed, run_dir, task)
+        })
+        .collect();
+    // The folder is checked once, before any seed trains.
+    phase(&python, &folder, &tasks[0].2, "check")?;
+    let jobs = match args.jobs {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        n => n,
+    };
+    let failures = for_each_seed(&tasks, jobs, |(seed, run_dir, task)| {
+        run_seed(&python, &folder, *seed, run_dir, task)
+    })?;
     let mut dirs = vec![experiment_dir.clone()];
     dirs.extend(args.with.iter().cloned());
     let out = args
@@ -435,6 +415,88 @@ pub fn submit(registry: &Registry, args: &SubmitArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Trains (unless complete), infers and generalizes one seed; `Ok(Some(why))` when the
+/// participant's code raised, `Err` when the harness itself could not go on.
+fn run_seed(
+    python: &Path,
+    folder: &Path,
+    seed: u64,
+    run_dir: &Path,
+    task: &serde_json::Value,
+) -> Result<Option<String>> {
+    let complete = run_dir.exists() && LoadedRun::open(run_dir)?.is_complete()?;
+    if complete {
+        eprintln!("{}: already trained (complete)", run_dir.display());
+    } else {
+        eprintln!("== train {} (seed {seed})", folder.display());
+        if !phase(python, folder, task, "train")? {
+            eprintln!(
+                "{}: training raised (traceback above: train(), or the evaluation of its \
+                 final policy when it logged none); the run is marked failed",
+                run_dir.display()
+            );
+            return Ok(Some(format!("{}: training raised", run_dir.display())));
+        }
+    }
+    for (what, file) in [
+        ("infer", INFERENCE_FILE),
+        ("generalize", GENERALIZATION_FILE),
+    ] {
+        if complete && run_dir.join(file).is_file() {
+            continue;
+        }
+        eprintln!("== {what} {}", run_dir.display());
+        if !phase(python, folder, task, what)? {
+            return Ok(Some(format!(
+                "{}: {what}: the participant's inference code raised",
+                run_dir.display()
+            )));
+        }
+    }
+    print_results(run_dir)?;
+    Ok(None)
+}
+
+/// Runs `work` on every item, `jobs` at a time, and gathers the failures it reports in the
+/// items' order. An error stops the items not yet started (those running finish); then the
+/// error of the earliest item is returned.
+fn for_each_seed<T: Sync>(
+    items: &[T],
+    jobs: usize,
+    work: impl Fn(&T) -> Result<Option<String>> + Sync,
+) -> Result<Vec<String>> {
+    use std::sync::Mutex;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let next = AtomicUsize::new(0);
+    let outcomes: Mutex<Vec<(usize, Result<Option<String>>)>> = Mutex::new(Vec::new());
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.clamp(1, items.len().max(1)) {
+            scope.spawn(|| {
+                while !stop.load(Ordering::SeqCst) {
+                    let i = next.fetch_add(1, Ordering::SeqCst);
+                    let Some(item) = items.get(i) else { break };
+                    let outcome = work(item);
+                    if outcome.is_err() {
+                        stop.store(true, Ordering::SeqCst);
+                    }
+                    outcomes
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .push((i, outcome));
+                }
+            });
+        }
+    });
+    let mut outcomes = outcomes.into_inner().unwrap_or_else(|e| e.into_inner());
+    outcomes.sort_by_key(|(i, _)| *i);
+    let mut failures = Vec::new();
+    for (_, outcome) in outcomes {
+        failures.extend(outcome?);
+    }
+    Ok(failures)
 }
 
 fn print_results(run_dir: &Path) -> Result<()> {
@@ -525,5 +587,34 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("no such participant folder"), "{err}");
+    }
+
+    #[test]
+    fn seeds_side_by_side_report_failures_in_order_and_stop_after_an_error() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let seeds: Vec<u64> = (0..6).collect();
+        let started = AtomicUsize::new(0);
+        let failures = for_each_seed(&seeds, 2, |&s| {
+            started.fetch_add(1, Ordering::SeqCst);
+            Ok((s % 2 == 1).then(|| format!("seed {s} raised")))
+        })
+        .unwrap();
+        assert_eq!(
+            failures,
+            ["seed 1 raised", "seed 3 raised", "seed 5 raised"]
+        );
+        assert_eq!(started.load(Ordering::SeqCst), 6);
+        // One at a time, an error at seed 2 leaves seeds 3 to 5 unstarted.
+        let started = AtomicUsize::new(0);
+        let err = for_each_seed(&seeds, 1, |&s| {
+            started.fetch_add(1, Ordering::SeqCst);
+            if s == 2 {
+                anyhow::bail!("harness stopped at seed {s}")
+            }
+            Ok(None)
+        })
+        .unwrap_err();
+        assert_eq!(err.to_string(), "harness stopped at seed 2");
+        assert_eq!(started.load(Ordering::SeqCst), 3);
     }
 }

@@ -325,3 +325,28 @@ def test_the_submission_and_the_builtin_bundle_and_verify(example) -> None:
     with tarfile.open(tmp / "submission.a2perf", "r:gz") as tar:
         names = tar.getnames()
     assert any(n.endswith("submission/code/train.py") for n in names), names
+
+
+def test_seeds_run_side_by_side_with_jobs_give_the_same_results(example) -> None:
+    # Seeds 0 and 1 two at a time, in the venv the fixture made: both complete, and seed 0 is
+    # what the fixture's one-at-a-time submission of seed 0 gave (curve and rollouts).
+    python = example["tmp"] / "runs" / "submission" / ".venv" / "bin" / "python"
+    root = example["tmp"] / "jobs"
+    out = submit(str(EXAMPLE), CONFIG, "--seeds", "0,1", "--jobs", "2", "--root-dir",
+                 str(root), "--participant-args", "population=6,elite=2", "--python",
+                 str(python), *SMALL)
+    runs = sorted((root / "submission").glob("*__submission__seed*"))
+    assert [r.name[-5:] for r in runs] == ["seed0", "seed1"], out.stderr
+    for run in runs:
+        assert read(run / "status.json")["state"] == "complete"
+        assert len(read(run / "generalization.json")["tasks"]) == 5
+    def curve(run: Path) -> list:
+        points = read(run / "curve.json")["points"]
+        return [(p["env_steps"], p["mean_return"], p["std_return"]) for p in points]
+
+    assert curve(runs[0]) == curve(example["run"])
+    ours, before = read(runs[0] / "inference.json"), read(example["run"] / "inference.json")
+    assert ours["rollout_returns"] == before["rollout_returns"]
+    assert out.stderr.count("== train") == 2, out.stderr
+    board = read(root / "submission" / "report" / "leaderboard.json")
+    assert [e["seeds"] for e in board["entries"]] == [[0, 1]], board["entries"]
