@@ -440,6 +440,7 @@ fn run_seed(
             return Ok(Some(format!("{}: training raised", run_dir.display())));
         }
     }
+    let mut failure = None;
     for (what, file) in [
         ("infer", INFERENCE_FILE),
         ("generalize", GENERALIZATION_FILE),
@@ -449,14 +450,16 @@ fn run_seed(
         }
         eprintln!("== {what} {}", run_dir.display());
         if !phase(python, folder, task, what)? {
-            return Ok(Some(format!(
+            failure = Some(format!(
                 "{}: {what}: the participant's inference code raised",
                 run_dir.display()
-            )));
+            ));
+            break;
         }
     }
+    // What was written is shown even when a later phase raised (inference before generalization).
     print_results(run_dir)?;
-    Ok(None)
+    Ok(failure)
 }
 
 /// Runs `work` on every item, `jobs` at a time, and gathers the failures it reports in the
