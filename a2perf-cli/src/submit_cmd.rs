@@ -386,11 +386,7 @@ pub fn submit(registry: &Registry, args: &SubmitArgs) -> Result<()> {
         .collect();
     // The folder is checked once, before any seed trains.
     phase(&python, &folder, &tasks[0].2, "check")?;
-    let jobs = match args.jobs {
-        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
-        n => n,
-    };
-    let failures = for_each_seed(&tasks, jobs, |(seed, run_dir, task)| {
+    let failures = for_each_seed(&tasks, args.jobs, |(seed, run_dir, task)| {
         run_seed(&python, &folder, *seed, run_dir, task)
     })?;
     let mut dirs = vec![experiment_dir.clone()];
@@ -462,41 +458,24 @@ fn run_seed(
     Ok(failure)
 }
 
-/// Runs `work` on every item, `jobs` at a time, and gathers the failures it reports in the
-/// items' order. An error stops the items not yet started (those running finish); then the
-/// error of the earliest item is returned.
+/// Runs `work` on every item, `jobs` at a time (the pipeline's pool), and gathers the failures
+/// it reports in the items' order. An error stops the items not yet started (those running
+/// finish); then the error of the earliest item is returned.
 fn for_each_seed<T: Sync>(
     items: &[T],
     jobs: usize,
     work: impl Fn(&T) -> Result<Option<String>> + Sync,
 ) -> Result<Vec<String>> {
-    use std::sync::Mutex;
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    let next = AtomicUsize::new(0);
-    let outcomes: Mutex<Vec<(usize, Result<Option<String>>)>> = Mutex::new(Vec::new());
-    let stop = std::sync::atomic::AtomicBool::new(false);
-    std::thread::scope(|scope| {
-        for _ in 0..jobs.clamp(1, items.len().max(1)) {
-            scope.spawn(|| {
-                while !stop.load(Ordering::SeqCst) {
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(item) = items.get(i) else { break };
-                    let outcome = work(item);
-                    if outcome.is_err() {
-                        stop.store(true, Ordering::SeqCst);
-                    }
-                    outcomes
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .push((i, outcome));
-                }
-            });
+    let stop = pipeline::CancelToken::new();
+    let outcomes = pipeline::for_each(items.len(), jobs, &stop, |i| {
+        let outcome = work(&items[i]);
+        if outcome.is_err() {
+            stop.cancel();
         }
+        outcome
     });
-    let mut outcomes = outcomes.into_inner().unwrap_or_else(|e| e.into_inner());
-    outcomes.sort_by_key(|(i, _)| *i);
     let mut failures = Vec::new();
-    for (_, outcome) in outcomes {
+    for outcome in outcomes.into_iter().flatten() {
         failures.extend(outcome?);
     }
     Ok(failures)

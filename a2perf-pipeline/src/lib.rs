@@ -96,6 +96,7 @@ pub use plan::{
     InferenceSettings, LoadedPlans, ObservationSource, ProfileRecord, ProfileSwitch, RunJob, Shard,
     Suite, SuiteSource, TaskSpec, check_dir_name, from_experiment, grid, load_plans, parse_seeds,
 };
+pub use pool::for_each;
 pub use run::{RunEvent, RunOptions, TrainTask, expand_runs, run_experiments};
 pub use run_dir::{
     CHECKPOINT_DIR, CURVE_CSV, CURVE_JSON, ExternalAgent, GENERALIZATION_FILE, INFERENCE_FILE,

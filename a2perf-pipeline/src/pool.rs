@@ -104,6 +104,41 @@ impl<R> Board<R> {
     }
 }
 
+/// Runs `work(i)` for every `i < n` on `jobs` threads (0 = one per logical CPU), starting the
+/// items in order; once `cancel` fires no further item starts (the running ones finish).
+/// Returns each item's result in order, `None` for an item that never started. A front end's
+/// seeds or runs that need no dependencies between them (`a2perf submit --jobs`).
+///
+/// ```
+/// use a2perf_pipeline::{CancelToken, for_each};
+/// let cancel = CancelToken::new();
+/// let squares = for_each(4, 2, &cancel, |i| i * i);
+/// assert_eq!(squares, [Some(0), Some(1), Some(4), Some(9)]);
+/// // One at a time, an item that cancels leaves the later ones unstarted.
+/// let stopped = for_each(4, 1, &cancel, |i| {
+///     if i == 1 {
+///         cancel.cancel();
+///     }
+///     i
+/// });
+/// assert_eq!(stopped, [Some(0), Some(1), None, None]);
+/// ```
+pub fn for_each<R: Send>(
+    n: usize,
+    jobs: usize,
+    cancel: &CancelToken,
+    work: impl Fn(usize) -> R + Sync,
+) -> Vec<Option<R>> {
+    let deps = vec![Vec::new(); n];
+    run(&deps, workers(jobs), cancel, &work, &|_| true, &mut |_| {})
+        .into_iter()
+        .map(|slot| match slot {
+            Slot::Done(r) => Some(r),
+            Slot::Blocked { .. } | Slot::NotRun => None,
+        })
+        .collect()
+}
+
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // A worker never panics while holding the lock (tasks run outside it), so a poisoned lock
     // still holds consistent state.
