@@ -7,18 +7,20 @@ use a2perf_core::alloc_count::{CountingAllocator, count_allocations};
 use a2perf_core::{Action, Env, Observation, Step};
 use a2perf_locomotion::env::{EnvConfig, LocomotionEnv, Mode, MotionSource};
 use a2perf_locomotion::gait::Gait;
+use a2perf_locomotion::sim::Physics;
 use a2perf_locomotion::{RobotModel, SimConfig, Simulation};
 use criterion::{Criterion, criterion_group, criterion_main};
 
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
 
-fn make_with(solver_iterations: usize, train: bool) -> LocomotionEnv {
+fn make_with(physics: Physics, solver_iterations: usize, train: bool) -> LocomotionEnv {
     let mut cfg = EnvConfig::new(
         "QuadrupedLocomotion-DogPace-v0",
         MotionSource::Generated(Gait::Pace),
     );
     cfg.solver_iterations = solver_iterations;
+    cfg.physics = physics;
     if train {
         // Domain randomisation (incl. the knee-friction motors), full-length episodes.
         cfg.mode = Mode::Train;
@@ -28,12 +30,12 @@ fn make_with(solver_iterations: usize, train: bool) -> LocomotionEnv {
     LocomotionEnv::new(cfg).unwrap()
 }
 
-fn make() -> LocomotionEnv {
-    make_with(SimConfig::default().solver_iterations, false)
+fn make(physics: Physics) -> LocomotionEnv {
+    make_with(physics, SimConfig::default().solver_iterations, false)
 }
 
-fn allocations_per_step() {
-    let mut env = make();
+fn allocations_per_step(physics: Physics) {
+    let mut env = make(physics);
     let mut obs = Observation::default();
     env.reset_into(Some(0), &mut obs).unwrap();
     let action = Action::Continuous(vec![0.0; 12]);
@@ -52,7 +54,8 @@ fn allocations_per_step() {
         }
     });
     println!(
-        "allocations: {n} over {steps} env steps = {:.2}/env step ({:.3}/physics substep)",
+        "allocations ({}): {n} over {steps} env steps = {:.2}/env step ({:.3}/physics substep)",
+        physics.name(),
         n as f64 / steps as f64,
         n as f64 / (steps * 33) as f64
     );
@@ -65,8 +68,8 @@ fn thread_cpu_ns() -> Option<u64> {
     s.split_whitespace().next()?.parse().ok()
 }
 
-fn cpu_time_throughput(solver_iterations: usize, random: bool, train: bool) {
-    let mut env = make_with(solver_iterations, train);
+fn cpu_time_throughput(physics: Physics, solver_iterations: usize, random: bool, train: bool) {
+    let mut env = make_with(physics, solver_iterations, train);
     let mut obs = Observation::default();
     env.reset_into(Some(0), &mut obs).unwrap();
     let mut rng = a2perf_core::RngStream::new(0, "bench-actions");
@@ -89,7 +92,8 @@ fn cpu_time_throughput(solver_iterations: usize, random: bool, train: bool) {
     let cpu = (thread_cpu_ns().unwrap_or(c0) - c0) as f64 * 1e-9;
     let wall = w0.elapsed().as_secs_f64();
     println!(
-        "env steps (DogPace, {}, {} actions, resets included, {solver_iterations} solver iteration(s)): {:.0} per CPU-second ({:.0} substeps/CPU-s), {:.0} per wall-second",
+        "env steps (DogPace, {}, {}, {} actions, resets included, {solver_iterations} solver iteration(s)): {:.0} per CPU-second ({:.0} substeps/CPU-s), {:.0} per wall-second",
+        physics.name(),
         if train {
             "train mode + randomisation"
         } else {
@@ -103,35 +107,48 @@ fn cpu_time_throughput(solver_iterations: usize, random: bool, train: bool) {
 }
 
 fn benches(c: &mut Criterion) {
-    allocations_per_step();
-    cpu_time_throughput(1, false, false);
-    cpu_time_throughput(2, false, false);
-    cpu_time_throughput(1, true, false);
-    cpu_time_throughput(1, false, true);
+    for physics in [Physics::Rapier, Physics::Articulated] {
+        allocations_per_step(physics);
+        cpu_time_throughput(physics, 1, false, false);
+        cpu_time_throughput(physics, 2, false, false);
+        cpu_time_throughput(physics, 1, true, false);
+        cpu_time_throughput(physics, 1, false, true);
+    }
     let mut g = c.benchmark_group("locomotion");
     g.sample_size(20);
-    let mut env = make();
-    let mut obs = Observation::default();
-    env.reset_into(Some(0), &mut obs).unwrap();
-    let action = Action::Continuous(vec![0.0; 12]);
-    let mut step = Step::default();
-    g.bench_function("env_step_dog_pace", |b| {
-        b.iter(|| {
-            env.step_into(black_box(&action), &mut step).unwrap();
-            if step.done() {
-                env.reset_into(None, &mut obs).unwrap();
-            }
-        })
-    });
-    g.bench_function("env_reset", |b| {
-        b.iter(|| env.reset_into(None, &mut obs).unwrap())
-    });
-    let model = RobotModel::builtin();
-    let mut sim = Simulation::new(&model, SimConfig::default());
-    let target = model.default_motor_angles();
-    g.bench_function("physics_substep_pd", |b| {
-        b.iter(|| sim.step_pd(black_box(&target)))
-    });
+    for physics in [Physics::Rapier, Physics::Articulated] {
+        // The rapier names stay as they were, so earlier baselines still compare.
+        let suffix = match physics {
+            Physics::Rapier => "",
+            Physics::Articulated => "_articulated",
+        };
+        let mut env = make(physics);
+        let mut obs = Observation::default();
+        env.reset_into(Some(0), &mut obs).unwrap();
+        let action = Action::Continuous(vec![0.0; 12]);
+        let mut step = Step::default();
+        g.bench_function(format!("env_step_dog_pace{suffix}"), |b| {
+            b.iter(|| {
+                env.step_into(black_box(&action), &mut step).unwrap();
+                if step.done() {
+                    env.reset_into(None, &mut obs).unwrap();
+                }
+            })
+        });
+        g.bench_function(format!("env_reset{suffix}"), |b| {
+            b.iter(|| env.reset_into(None, &mut obs).unwrap())
+        });
+        let model = RobotModel::builtin();
+        let config = SimConfig {
+            physics,
+            ..SimConfig::default()
+        };
+        let mut sim = Simulation::new(&model, config);
+        let target = model.default_motor_angles();
+        g.bench_function(format!("physics_substep_pd{suffix}"), |b| {
+            b.iter(|| sim.step_pd(black_box(&target)))
+        });
+    }
     g.finish();
 }
 

@@ -32,7 +32,7 @@ use crate::motion::{
     MotionClip, MotionFrame, MotionVelocity, ReferenceMotion, heading_of, yaw_rotation,
 };
 use crate::render::{side_view, state_points};
-use crate::sim::{RobotState, SimConfig, Simulation};
+use crate::sim::{Physics, RobotState, SimConfig, Simulation};
 
 /// Observation size.
 pub const OBS_DIM: usize = 160;
@@ -108,8 +108,10 @@ pub struct EnvConfig {
     /// friction U[0.5, 1.25], knee joint friction [`KNEE_FRICTION_RANGE`] per knee (the
     /// reference's ranges). The registry turns it on by default in train mode.
     pub randomize: bool,
-    /// Rapier solver iterations per physics step.
+    /// Solver iterations per physics step (see [`SimConfig::solver_iterations`]).
     pub solver_iterations: usize,
+    /// The physics engine (rapier by default, the engine of every recorded result).
+    pub physics: Physics,
     /// End an episode at the length limit with `terminated` (A2Perf's environment, whose
     /// gymnasium compatibility layer reports motion_imitation's time limit as a termination)
     /// instead of `truncated` (Gymnasium semantics, what motion_imitation's own `info` says).
@@ -129,6 +131,7 @@ impl EnvConfig {
             control_latency: 0.002,
             randomize: false,
             solver_iterations: SimConfig::default().solver_iterations,
+            physics: Physics::Rapier,
             time_limit_terminates: false,
         }
     }
@@ -297,6 +300,7 @@ impl LocomotionEnv {
             SimConfig {
                 dt: SIM_DT,
                 solver_iterations: config.solver_iterations,
+                physics: config.physics,
             },
         );
         let mut metadata = BTreeMap::new();
@@ -307,10 +311,16 @@ impl LocomotionEnv {
         metadata.insert("robot".into(), model.name.clone());
         metadata.insert(
             "physics".into(),
-            format!(
-                "rapier3d 0.36, impulse joints, dt {SIM_DT} s x {ACTION_REPEAT}, {} solver iterations",
-                config.solver_iterations
-            ),
+            match config.physics {
+                Physics::Rapier => format!(
+                    "rapier3d 0.36, impulse joints, dt {SIM_DT} s x {ACTION_REPEAT}, {} solver iterations",
+                    config.solver_iterations
+                ),
+                Physics::Articulated => format!(
+                    "articulated (reduced coordinates), dt {SIM_DT} s x {ACTION_REPEAT}, {} solver iterations",
+                    config.solver_iterations
+                ),
+            },
         );
         metadata.insert(
             "action".into(),

@@ -1,11 +1,12 @@
 //! Quadruped locomotion for A2Perf: a Laikago-class robot imitating reference motions, simulated
-//! with rapier3d.
+//! with rapier3d (the default) or the crate's own reduced-coordinate engine
+//! (`physics: articulated`, [`sim::Physics`]).
 //!
 //! - [`model`]: the robot as project-owned RON data (masses, inertias, geometry, limits, default
 //!   pose, motor conventions, PD gains) and its kinematics; [`urdf`] reads real URDF files.
 //! - [`motion`]: motion_imitation JSON clips and their interpolation; [`gait`] generates the
 //!   built-in clips (pace, trot, spin, bound, pronk, side step, turn).
-//! - [`sim`]: the rapier3d world (1 ms steps, PD torques every step).
+//! - [`sim`]: the physics world (1 ms steps, PD torques every step) on either engine.
 //! - [`env`](mod@env): the imitation task (160-D observation, 5-term reward, terminations);
 //!   [`register`] adds `QuadrupedLocomotion-Dog{Pace,Trot,Spin}-v0` and `-Gait-v0`.
 //!
@@ -24,9 +25,11 @@
 //! `motion_file`), mesh collision shapes (simplified boxes, spheres and capsules are used),
 //! rendering beyond the CLI's HTML export and the environment's stick-figure side view
 //! ([`render::side_view`]), and PyBullet's exact contact model (rapier's
-//! soft-constraint contacts stand in for Bullet's).
+//! soft-constraint contacts stand in for Bullet's; the articulated engine has Bullet's soft toes,
+//! its other contacts are rigid).
 #![warn(missing_docs)]
 
+mod articulated;
 pub mod env;
 pub mod filter;
 pub mod gait;

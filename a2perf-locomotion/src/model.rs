@@ -247,6 +247,47 @@ impl RobotModel {
         }
     }
 
+    /// Mass properties of the three bodies of leg `leg` as the simulators build them — hip
+    /// motor, upper leg, and the lower leg with the toe merged in (combined COM; both inertias
+    /// moved there by the parallel-axis theorem) — each as (COM in the link frame, mass,
+    /// principal inertia about the COM).
+    ///
+    /// ```
+    /// let m = a2perf_locomotion::RobotModel::builtin();
+    /// let [_, _, (_, lower, _)] = m.leg_bodies(0);
+    /// assert!((lower - (m.legs[0].lower_leg.mass + m.legs[0].toe.mass)).abs() < 1e-12);
+    /// ```
+    pub fn leg_bodies(&self, leg: usize) -> [(Vector3<f64>, f64, Vector3<f64>); 3] {
+        let leg = &self.legs[leg];
+        let toe = v3(leg.toe_origin);
+        let (ml, mt) = (leg.lower_leg.mass, leg.toe.mass);
+        let cl = v3(leg.lower_leg.com);
+        let ct = toe + v3(leg.toe.com);
+        let c_lower = (cl * ml + ct * mt) / (ml + mt);
+        let par = |i: Vector3<f64>, m: f64, d: Vector3<f64>| {
+            Vector3::new(
+                i.x + m * (d.y * d.y + d.z * d.z),
+                i.y + m * (d.x * d.x + d.z * d.z),
+                i.z + m * (d.x * d.x + d.y * d.y),
+            )
+        };
+        let i_lower = par(v3(leg.lower_leg.inertia), ml, cl - c_lower)
+            + par(v3(leg.toe.inertia), mt, ct - c_lower);
+        [
+            (
+                v3(leg.hip_motor.com),
+                leg.hip_motor.mass,
+                v3(leg.hip_motor.inertia),
+            ),
+            (
+                v3(leg.upper_leg.com),
+                leg.upper_leg.mass,
+                v3(leg.upper_leg.inertia),
+            ),
+            (c_lower, ml + mt, i_lower),
+        ]
+    }
+
     /// Forward kinematics of leg `leg` at URDF angles `q`, relative to the base COM frame.
     pub fn leg_poses(&self, leg: usize, q: [f64; 3]) -> LegPoses {
         let l = &self.legs[leg];

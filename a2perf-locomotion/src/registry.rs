@@ -12,6 +12,7 @@ use a2perf_core::{EnvEntry, EnvError, ParamKind, ParamSpec, Params, Registry, Ta
 
 use crate::env::{EnvConfig, LocomotionEnv, Mode, MotionSource};
 use crate::gait::Gait;
+use crate::sim::Physics;
 
 /// Domain name.
 pub const DOMAIN: &str = "quadruped_locomotion";
@@ -75,6 +76,12 @@ fn common_params() -> Vec<ParamSpec> {
             ParamKind::Int,
             Value::Int(1),
             "rapier solver iterations per 1 ms step (2: ~6x tighter joints, ~35% slower)",
+        ),
+        ParamSpec::new(
+            "physics",
+            ParamKind::Str,
+            Value::Str("rapier".into()),
+            "physics engine: rapier (13 bodies and impulse joints; every recorded result) or articulated (reduced coordinates, exact joints, about twice as fast, different trajectories)",
         ),
         ParamSpec::new(
             "time_limit_terminates",
@@ -151,6 +158,13 @@ pub fn config_from_params(
         return Err(bad("solver_iterations", "must be in 1..=50"));
     }
     c.solver_iterations = it;
+    let physics = p.str("physics").map_err(|e| bad("physics", e))?;
+    c.physics = Physics::from_name(physics).ok_or_else(|| {
+        bad(
+            "physics",
+            format!("unknown engine `{physics}` (expected rapier or articulated)"),
+        )
+    })?;
     c.time_limit_terminates = p
         .bool("time_limit_terminates")
         .map_err(|e| bad("time_limit_terminates", e))?;

@@ -15,6 +15,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rapier3d::glamx::{Quat, Vec3};
 use rapier3d::prelude::*;
 
+use crate::articulated::Articulated;
 use crate::model::{NUM_LEGS, NUM_MOTORS, RobotModel, v3};
 
 /// Kind of a robot link, for contact bookkeeping.
@@ -39,16 +40,58 @@ impl LinkKind {
     }
 }
 
+/// Which engine steps the robot.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Physics {
+    /// rapier3d: 13 rigid bodies held together by impulse joints (the engine of every recorded
+    /// result).
+    #[default]
+    Rapier,
+    /// This crate's reduced-coordinate engine (`articulated`): the tree as 18 generalized
+    /// coordinates, exact joints, contacts and limits by projected Gauss–Seidel. About twice
+    /// as fast; its trajectories differ from rapier's.
+    Articulated,
+}
+
+impl Physics {
+    /// The name used in environment parameters: `rapier` or `articulated`.
+    ///
+    /// ```
+    /// use a2perf_locomotion::sim::Physics;
+    /// assert_eq!(Physics::from_name("articulated"), Some(Physics::Articulated));
+    /// assert_eq!(Physics::Rapier.name(), "rapier");
+    /// assert_eq!(Physics::from_name("bullet"), None);
+    /// ```
+    pub fn name(self) -> &'static str {
+        match self {
+            Physics::Rapier => "rapier",
+            Physics::Articulated => "articulated",
+        }
+    }
+
+    /// Parses [`Self::name`].
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "rapier" => Some(Physics::Rapier),
+            "articulated" => Some(Physics::Articulated),
+            _ => None,
+        }
+    }
+}
+
 /// Simulation settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimConfig {
     /// Physics step \[s\].
     pub dt: f64,
-    /// Rapier solver iterations per step. The default, 1, meets the speed target; joints then
+    /// Solver iterations per step. Rapier: the default, 1, meets the speed target; joints then
     /// separate by at most ~2 mm under violent random actions (2 iterations: ~0.3 mm, about 35%
     /// slower). The reference uses 9 Bullet iterations, which rapier's soft-constraint solver with
-    /// a 1 ms step does not need for stability.
+    /// a 1 ms step does not need for stability. Articulated: 4 Gauss–Seidel sweeps over the
+    /// contact, limit and friction rows per iteration.
     pub solver_iterations: usize,
+    /// The engine.
+    pub physics: Physics,
 }
 
 impl Default for SimConfig {
@@ -56,6 +99,7 @@ impl Default for SimConfig {
         Self {
             dt: 0.001,
             solver_iterations: 1,
+            physics: Physics::Rapier,
         }
     }
 }
@@ -129,6 +173,213 @@ fn mass_props(com: Vector3<f64>, mass: f64, inertia: Vector3<f64>) -> MassProper
 /// regularisation is then `1/(dt·gain)` = 0.1% at dt = 1 ms.
 const KNEE_FRICTION_GAIN: f32 = 1.0e6;
 
+/// The physics world of one robot, on the engine its [`SimConfig`] names.
+pub struct Simulation {
+    config: SimConfig,
+    time: f64,
+    engine: Engine,
+}
+
+enum Engine {
+    Rapier(Box<Rapier>),
+    Articulated(Box<Articulated>),
+}
+
+/// Calls the same method on whichever engine runs.
+macro_rules! engine {
+    ($self:expr, $e:ident => $body:expr) => {
+        match &$self.engine {
+            Engine::Rapier($e) => $body,
+            Engine::Articulated($e) => $body,
+        }
+    };
+    (mut $self:expr, $e:ident => $body:expr) => {
+        match &mut $self.engine {
+            Engine::Rapier($e) => $body,
+            Engine::Articulated($e) => $body,
+        }
+    };
+}
+
+impl Simulation {
+    /// Builds the world with the robot at the model's initial position and default pose.
+    ///
+    /// ```
+    /// use a2perf_locomotion::sim::{Physics, SimConfig, Simulation};
+    /// use a2perf_locomotion::RobotModel;
+    /// let model = RobotModel::builtin();
+    /// let config = SimConfig { physics: Physics::Articulated, ..SimConfig::default() };
+    /// let mut sim = Simulation::new(&model, config);
+    /// let target = model.default_motor_angles();
+    /// for _ in 0..500 {
+    ///     sim.step_pd(&target);
+    /// }
+    /// // Standing on its toes, the joints exact.
+    /// assert!(sim.toe_contacts().iter().all(|&t| t));
+    /// assert!((sim.state().base_pos.z - 0.43).abs() < 0.05);
+    /// assert_eq!(sim.max_joint_error(), 0.0);
+    /// ```
+    pub fn new(model: &RobotModel, config: SimConfig) -> Self {
+        let engine = match config.physics {
+            Physics::Rapier => Engine::Rapier(Box::new(Rapier::new(model, &config))),
+            Physics::Articulated => {
+                let mut a = Articulated::new(model, config.dt, config.solver_iterations);
+                let (x, y, z) = model.init_position;
+                a.set_state(&RobotState {
+                    base_pos: Vector3::new(x, y, z),
+                    q: model.default_urdf_angles(),
+                    ..RobotState::default()
+                });
+                Engine::Articulated(Box::new(a))
+            }
+        };
+        Self {
+            config,
+            time: 0.0,
+            engine,
+        }
+    }
+
+    /// The robot model.
+    pub fn model(&self) -> &RobotModel {
+        engine!(self, e => e.model())
+    }
+
+    /// The simulation settings.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// Simulated time since construction \[s\].
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// World poses of every body: base (COM frame), then per leg hip motor, upper leg, lower leg
+    /// (joint frames), computed from a state by forward kinematics.
+    pub fn body_poses(
+        model: &RobotModel,
+        state: &RobotState,
+    ) -> [Isometry3<f64>; 1 + 3 * NUM_LEGS] {
+        let base = Isometry3::from_parts(Translation3::from(state.base_pos), state.base_rot);
+        let mut out = [base; 1 + 3 * NUM_LEGS];
+        for leg in 0..NUM_LEGS {
+            let p = model.leg_poses(
+                leg,
+                [state.q[3 * leg], state.q[3 * leg + 1], state.q[3 * leg + 2]],
+            );
+            out[1 + 3 * leg] = base * p.hip_motor;
+            out[2 + 3 * leg] = base * p.upper_leg;
+            out[3 + 3 * leg] = base * p.lower_leg;
+        }
+        out
+    }
+
+    /// Teleports the robot to `state` (poses and velocities of every body).
+    pub fn set_state(&mut self, state: &RobotState) {
+        engine!(mut self, e => e.set_state(state))
+    }
+
+    /// World pose of body `i` (0 = base COM frame, then legs × (hip, upper, lower)).
+    pub fn body_pose(&self, i: usize) -> Isometry3<f64> {
+        match &self.engine {
+            Engine::Rapier(e) => e.body_pose(i),
+            Engine::Articulated(e) => Self::body_poses(e.model(), &e.state())[i],
+        }
+    }
+
+    /// The current state.
+    pub fn state(&self) -> RobotState {
+        engine!(self, e => e.state())
+    }
+
+    /// URDF joint angles and velocities.
+    pub fn joint_state(&self) -> ([f64; NUM_MOTORS], [f64; NUM_MOTORS]) {
+        match &self.engine {
+            Engine::Rapier(e) => *e.joint_state(),
+            Engine::Articulated(e) => e.joint_state(),
+        }
+    }
+
+    /// Largest separation \[m\] between the two bodies' copies of a joint anchor — how far the
+    /// impulse-joint solver lets the tree come apart (0 for the articulated engine, whose joints
+    /// are exact).
+    pub fn max_joint_error(&self) -> f64 {
+        match &self.engine {
+            Engine::Rapier(e) => e.max_joint_error(),
+            Engine::Articulated(_) => 0.0,
+        }
+    }
+
+    /// Sets the per-motor strength multipliers (1 = nominal).
+    pub fn set_motor_strength(&mut self, strength: [f64; NUM_MOTORS]) {
+        engine!(mut self, e => e.set_motor_strength(strength))
+    }
+
+    /// Scales masses and inertias: `base` for the chassis and hip motors, `leg` for the upper and
+    /// lower legs (with toes), as the reference's randomiser groups them.
+    pub fn set_mass_scale(
+        &mut self,
+        base_mass: f64,
+        leg_mass: f64,
+        base_inertia: f64,
+        leg_inertia: f64,
+    ) {
+        engine!(mut self, e => e.set_mass_scale(base_mass, leg_mass, base_inertia, leg_inertia))
+    }
+
+    /// Sets the lateral friction of the toes and lower legs (before multiplying with the ground).
+    pub fn set_foot_friction(&mut self, friction: f64) {
+        engine!(mut self, e => e.set_foot_friction(friction))
+    }
+
+    /// Sets the dry friction torque [N·m] of each knee joint (FR, FL, RR, RL), as the reference's
+    /// randomiser does with a PyBullet velocity motor (target velocity 0, maximum force =
+    /// friction) on the foot-link joints — of which only the knees move.
+    ///
+    /// Rapier: a joint motor driving the knee's relative velocity to zero with its torque bounded
+    /// by the friction; joints are only touched when a value changes, so a world that never sets
+    /// friction steps exactly as one without this feature. Articulated: a velocity row of the
+    /// constraint solver with the same bound.
+    pub fn set_knee_friction(&mut self, friction: [f64; NUM_LEGS]) {
+        engine!(mut self, e => e.set_knee_friction(friction))
+    }
+
+    /// Current knee joint friction torques [N·m] (FR, FL, RR, RL).
+    pub fn knee_friction(&self) -> [f64; NUM_LEGS] {
+        engine!(self, e => e.knee_friction())
+    }
+
+    /// Last applied motor-space torques.
+    pub fn torques(&self) -> &[f64; NUM_MOTORS] {
+        engine!(self, e => e.torques())
+    }
+
+    /// Advances one physics step with motor-space PD targets `target`: torques
+    /// `strength·(−kp(q − q*) − kd·q̇)` from the current true joint state.
+    pub fn step_pd(&mut self, target: &[f64; NUM_MOTORS]) {
+        engine!(mut self, e => e.step_pd(target));
+        self.time += self.config.dt;
+    }
+
+    /// Advances one physics step with no actuation change (rapier) or no actuation
+    /// (articulated).
+    pub fn step_physics(&mut self) {
+        engine!(mut self, e => e.step_physics());
+        self.time += self.config.dt;
+    }
+
+    /// Whether any link touches the ground: returns (foot contact, non-foot contact).
+    pub fn ground_contacts(&self) -> (bool, bool) {
+        engine!(self, e => e.ground_contacts())
+    }
+
+    /// Which toes touch the ground (FR, FL, RR, RL).
+    pub fn toe_contacts(&self) -> [bool; NUM_LEGS] {
+        engine!(self, e => e.toe_contacts())
+    }
+}
+
 /// One actuated joint: parent and child bodies, axis in the parent body frame.
 #[derive(Clone, Copy, Debug)]
 struct Motor {
@@ -137,10 +388,9 @@ struct Motor {
     axis: Vec3,
 }
 
-/// The physics world of one robot.
-pub struct Simulation {
+/// The rapier3d world of one robot.
+struct Rapier {
     model: RobotModel,
-    config: SimConfig,
     gravity: Vec3,
     params: IntegrationParameters,
     pipeline: PhysicsPipeline,
@@ -167,12 +417,11 @@ pub struct Simulation {
     torques: [f64; NUM_MOTORS],
     /// Joint angles and velocities of the current body state (refreshed after every change).
     joints: ([f64; NUM_MOTORS], [f64; NUM_MOTORS]),
-    time: f64,
 }
 
-impl Simulation {
+impl Rapier {
     /// Builds the world with the robot at the model's initial position and default pose.
-    pub fn new(model: &RobotModel, config: SimConfig) -> Self {
+    fn new(model: &RobotModel, config: &SimConfig) -> Self {
         let mut bodies = RigidBodySet::new();
         let mut colliders = ColliderSet::new();
         let mut impulse_joints = ImpulseJointSet::new();
@@ -231,34 +480,9 @@ impl Simulation {
             axis: Vec3::X,
         }; NUM_MOTORS];
         for (li, leg) in model.legs.iter().enumerate() {
-            // Lower leg and toe are one rigid body: combine their mass properties.
+            // Lower leg and toe are one rigid body.
             let toe = v3(leg.toe_origin);
-            let (ml, mt) = (leg.lower_leg.mass, leg.toe.mass);
-            let cl = v3(leg.lower_leg.com);
-            let ct = toe + v3(leg.toe.com);
-            let c_lower = (cl * ml + ct * mt) / (ml + mt);
-            let par = |i: Vector3<f64>, m: f64, d: Vector3<f64>| {
-                Vector3::new(
-                    i.x + m * (d.y * d.y + d.z * d.z),
-                    i.y + m * (d.x * d.x + d.z * d.z),
-                    i.z + m * (d.x * d.x + d.y * d.y),
-                )
-            };
-            let i_lower = par(v3(leg.lower_leg.inertia), ml, cl - c_lower)
-                + par(v3(leg.toe.inertia), mt, ct - c_lower);
-            let specs = [
-                (
-                    v3(leg.hip_motor.com),
-                    leg.hip_motor.mass,
-                    v3(leg.hip_motor.inertia),
-                ),
-                (
-                    v3(leg.upper_leg.com),
-                    leg.upper_leg.mass,
-                    v3(leg.upper_leg.inertia),
-                ),
-                (c_lower, ml + mt, i_lower),
-            ];
+            let specs = model.leg_bodies(li);
             let origins = [
                 v3(leg.hip_origin) - com,
                 v3(leg.upper_origin),
@@ -343,7 +567,6 @@ impl Simulation {
         };
         let mut sim = Self {
             model: model.clone(),
-            config,
             gravity: Vec3::new(0.0, 0.0, model.gravity as f32),
             params,
             pipeline: PhysicsPipeline::new(),
@@ -367,7 +590,6 @@ impl Simulation {
             strength: [1.0; NUM_MOTORS],
             torques: [0.0; NUM_MOTORS],
             joints: ([0.0; NUM_MOTORS], [0.0; NUM_MOTORS]),
-            time: 0.0,
         };
         let (x, y, z) = model.init_position;
         let state = RobotState {
@@ -384,39 +606,9 @@ impl Simulation {
         &self.model
     }
 
-    /// The simulation settings.
-    pub fn config(&self) -> &SimConfig {
-        &self.config
-    }
-
-    /// Simulated time since construction \[s\].
-    pub fn time(&self) -> f64 {
-        self.time
-    }
-
-    /// World poses of every body: base (COM frame), then per leg hip motor, upper leg, lower leg
-    /// (joint frames), computed from a state by forward kinematics.
-    pub fn body_poses(
-        model: &RobotModel,
-        state: &RobotState,
-    ) -> [Isometry3<f64>; 1 + 3 * NUM_LEGS] {
-        let base = Isometry3::from_parts(Translation3::from(state.base_pos), state.base_rot);
-        let mut out = [base; 1 + 3 * NUM_LEGS];
-        for leg in 0..NUM_LEGS {
-            let p = model.leg_poses(
-                leg,
-                [state.q[3 * leg], state.q[3 * leg + 1], state.q[3 * leg + 2]],
-            );
-            out[1 + 3 * leg] = base * p.hip_motor;
-            out[2 + 3 * leg] = base * p.upper_leg;
-            out[3 + 3 * leg] = base * p.lower_leg;
-        }
-        out
-    }
-
     /// Teleports the robot to `state` (poses and velocities of every body).
     pub fn set_state(&mut self, state: &RobotState) {
-        let poses = Self::body_poses(&self.model, state);
+        let poses = Simulation::body_poses(&self.model, state);
         let handles = self.body_handles();
         // Joint origins and world axes along each leg for the velocity propagation.
         for (b, h) in handles.iter().enumerate() {
@@ -544,22 +736,11 @@ impl Simulation {
         self.strength = strength;
     }
 
-    /// Scales masses and inertias: `base` for the chassis and hip motors, `leg` for the upper and
-    /// lower legs (with toes), as the reference's randomiser groups them.
-    pub fn set_mass_scale(
-        &mut self,
-        base_mass: f64,
-        leg_mass: f64,
-        base_inertia: f64,
-        leg_inertia: f64,
-    ) {
+    /// See [`Simulation::set_mass_scale`].
+    fn set_mass_scale(&mut self, bm: f64, lm: f64, bi: f64, li: f64) {
         for (idx, (h, c, m, i)) in self.nominal_mass.iter().enumerate() {
             let is_base_group = idx == 0 || (idx - 1) % 3 == 0;
-            let (ms, is) = if is_base_group {
-                (base_mass, base_inertia)
-            } else {
-                (leg_mass, leg_inertia)
-            };
+            let (ms, is) = if is_base_group { (bm, bi) } else { (lm, li) };
             self.bodies[*h].set_additional_mass_properties(mass_props(*c, m * ms, i * is), true);
         }
     }
@@ -654,7 +835,6 @@ impl Simulation {
             &(),
             &(),
         );
-        self.time += self.config.dt;
         self.refresh_joints();
     }
 

@@ -11,6 +11,8 @@
 //!   `Vec` on every solve, unconditionally;
 //! - 1 per substep in which some contact begins or ends (narrow-phase transition list).
 //!
+//! The reduced-coordinate engine (`physics: articulated`) allocates nothing per step.
+//!
 //! These tests pin that budget, so that any allocation added to our per-step code (which would
 //! come on top of rapier's) fails them, and print the measured figures.
 
@@ -18,6 +20,7 @@ use a2perf_core::alloc_count::{CountingAllocator, count_allocations};
 use a2perf_core::{Action, Env, Observation, Step};
 use a2perf_locomotion::env::{ACTION_REPEAT, EnvConfig, LocomotionEnv, Mode, MotionSource};
 use a2perf_locomotion::gait::{self, Gait};
+use a2perf_locomotion::sim::Physics;
 use a2perf_locomotion::{RobotModel, SimConfig, Simulation};
 
 #[global_allocator]
@@ -35,7 +38,7 @@ const RAPIER_PER_SUBSTEP: usize = if cfg!(debug_assertions) { 8 } else { 5 };
 
 /// Allocations per env step over `steps` zero-action steps after a warm-up, standing still on
 /// the default pose (constant contacts, no episode end).
-fn standing_allocations(mode: Mode, randomize: bool, steps: usize) -> f64 {
+fn standing_allocations(physics: Physics, mode: Mode, randomize: bool, steps: usize) -> f64 {
     let clip = gait::standing_clip(&RobotModel::builtin());
     let mut cfg = EnvConfig::new("stand", MotionSource::Clip(clip));
     cfg.ref_state_init_prob = 1.0;
@@ -43,6 +46,7 @@ fn standing_allocations(mode: Mode, randomize: bool, steps: usize) -> f64 {
     cfg.randomize = randomize;
     cfg.episode_steps = 10_000;
     cfg.curriculum_steps = 1.0;
+    cfg.physics = physics;
     let mut env = LocomotionEnv::new(cfg).unwrap();
     let mut obs = Observation::default();
     env.reset_into(Some(0), &mut obs).unwrap();
@@ -68,10 +72,40 @@ fn standing_allocations(mode: Mode, randomize: bool, steps: usize) -> f64 {
 fn env_step_allocates_only_rapiers_per_substep_floor() {
     let budget = (RAPIER_PER_SUBSTEP * ACTION_REPEAT) as f64;
     for (mode, randomize) in [(Mode::Test, false), (Mode::Train, true)] {
-        let per_step = standing_allocations(mode, randomize, 200);
+        let per_step = standing_allocations(Physics::Rapier, mode, randomize, 200);
         eprintln!("{mode:?}: {per_step:.2} allocations per env step (budget {budget})");
         assert!(per_step <= budget, "{mode:?}: {per_step} > {budget}");
     }
+}
+
+#[test]
+fn the_articulated_engine_allocates_nothing_per_step() {
+    for (mode, randomize) in [(Mode::Test, false), (Mode::Train, true)] {
+        let per_step = standing_allocations(Physics::Articulated, mode, randomize, 200);
+        assert_eq!(per_step, 0.0, "{mode:?}");
+    }
+    // Walking too: contacts beginning and ending, random actions, episode ends and resets.
+    let mut cfg = EnvConfig::new("trot", MotionSource::Generated(Gait::Trot));
+    cfg.physics = Physics::Articulated;
+    let mut env = LocomotionEnv::new(cfg).unwrap();
+    let mut obs = Observation::default();
+    env.reset_into(Some(1), &mut obs).unwrap();
+    let mut step = Step::default();
+    // The first step sizes the step's buffers.
+    env.step_into(&Action::Continuous(vec![0.0; 12]), &mut step)
+        .unwrap();
+    let actions: Vec<Action> = (0..60)
+        .map(|k| Action::Continuous((0..12).map(|j| 0.3 * ((k * 5 + j) as f32).sin()).collect()))
+        .collect();
+    let n = count(|| {
+        for a in &actions {
+            env.step_into(a, &mut step).unwrap();
+            if step.done() {
+                break;
+            }
+        }
+    });
+    assert_eq!(n, 0);
 }
 
 #[test]

@@ -2,6 +2,7 @@
 README's same-run ratio row; target >= 1.5x).
 
     python3 python/benchmarks/mujoco_ratio.py [--wheel dist/a2perf_rs-...whl] [--rounds 7] [--steps 1000]
+        [--physics rapier|articulated]
 
 By hand, not in CI. On first use it makes its own venv (~/.cache/a2perf-rs/bench-venv, or
 $A2PERF_BENCH_CACHE/bench-venv) with ``mujoco``, ``numpy`` and ``gymnasium`` from PyPI, then
@@ -13,8 +14,10 @@ collection): a 0.5 x 0.2 x 0.1 m, 13 kg trunk; four legs with hip-abduction, hip
 (12 joints) and capsule links with a toe sphere; 12 position actuators; a floor plane, robot-floor
 contacts only (as ours). Bare physics: ``mj_step`` with a fixed standing action, 1 ms timestep,
 33 steps per env step, MuJoCo's default solver settings, nothing else (no observation, reward or
-reset). Our side: ``A2PerfEnv("QuadrupedLocomotion-DogPace-v0")`` stepped from Python with the
-zero action (the default pose), observation, reward, PD control and resets included.
+reset). Our side: ``A2PerfEnv("QuadrupedLocomotion-DogPace-v0", physics=...)`` stepped from
+Python with the zero action (the default pose), observation, reward, PD control and resets
+included, on the engine ``--physics`` names (default ``articulated``, this crate's
+reduced-coordinate engine; ``rapier``, the engine of the recorded results).
 
 Both run in this process, pinned to one core, one thread each, in alternating rounds. Three rates
 per side, medians over rounds: per second of this thread's CPU time, per wall second, and one
@@ -121,11 +124,11 @@ class Mujoco:
 
 
 class Ours:
-    def __init__(self) -> None:
+    def __init__(self, physics: str) -> None:
         import numpy as np
         from a2perf_rs import A2PerfEnv
 
-        self.env = A2PerfEnv(DOG)
+        self.env = A2PerfEnv(DOG, physics=physics)
         self.action = np.zeros(self.env.action_space.shape, dtype=np.float32)
         self.env.reset(seed=0)
         self.resets = 0
@@ -146,15 +149,17 @@ class OursCli:
     """`a2perf bench` (native loop, uniform random actions, resets included in its wall rate),
     for a binary built from a tree whose wheel is not at hand."""
 
-    def __init__(self, binary: str) -> None:
+    def __init__(self, binary: str, physics: str) -> None:
         self.binary = binary
+        self.physics = physics
         self.resets = 0
         self.round = 0
 
     def bench(self, steps: int) -> dict:
         self.round += 1
         out = subprocess.run([self.binary, "bench", DOG, "--steps", str(steps), "--seed",
-                              str(self.round), "--json"], check=True, capture_output=True, text=True)
+                              str(self.round), "--set", f"physics={self.physics}", "--json"],
+                             check=True, capture_output=True, text=True)
         report = json.loads(out.stdout)
         self.resets += report["episodes"] - 1
         return report
@@ -178,6 +183,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=1000, help="env steps per round and side")
     ap.add_argument("--a2perf", help="time ours with this binary's `a2perf bench` (random "
                     "actions, native loop) instead of the wheel")
+    ap.add_argument("--physics", choices=["articulated", "rapier"], default="articulated",
+                    help="our engine (default articulated)")
     args = ap.parse_args()
     if args.a2perf:
         args.a2perf = str(Path(args.a2perf).resolve())
@@ -189,7 +196,8 @@ def main() -> None:
 
     cpu = _venv.pin_one_core()
     load_before = _venv.load_average()
-    sims = {"mujoco": Mujoco(), "ours": OursCli(args.a2perf) if args.a2perf else Ours()}
+    ours = OursCli(args.a2perf, args.physics) if args.a2perf else Ours(args.physics)
+    sims = {"mujoco": Mujoco(), "ours": ours}
     for sim in sims.values():  # warm-up
         timed(sim, 50)
     rates: dict[str, dict[str, list]] = {k: {"cpu": [], "wall": [], "p50": []} for k in sims}
@@ -204,11 +212,12 @@ def main() -> None:
     wall_s = {k: _venv.summary(v["wall"]) for k, v in rates.items()}
     step_s = {k: _venv.summary(v["p50"]) for k, v in rates.items()}
     print(json.dumps({
-        "what": "env steps/s on one core: ours (DogPace, " + (
+        "what": f"env steps/s on one core: ours (DogPace, {args.physics}, " + (
             "`a2perf bench`, random actions" if args.a2perf else "wheel, zero action") +
             ", obs+reward+PD; resets in the wall rates) vs MuJoCo bare physics (12-actuator "
             "quadruped, 1 ms x 33 mj_step, fixed action)",
         "ratio_step_median": step_s["ours"]["median"] / step_s["mujoco"]["median"],
+        "physics": args.physics,
         "mujoco_version": mujoco.__version__,
         "cpu": cpu,
         "rounds": args.rounds,
