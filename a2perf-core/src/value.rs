@@ -249,6 +249,8 @@ pub struct ParamSpec {
     pub default: Value,
     /// One-line documentation.
     pub doc: &'static str,
+    /// A setting of the simulator rather than of the task (see [`Self::follows_run`]).
+    pub follows_run: bool,
 }
 
 impl ParamSpec {
@@ -259,7 +261,22 @@ impl ParamSpec {
             kind,
             default,
             doc,
+            follows_run: false,
         }
+    }
+
+    /// Marks a setting of the simulator rather than of the task (locomotion's physics engine):
+    /// a run's generalization tasks take the run's value wherever theirs would differ and the
+    /// suite does not set it, so a policy is scored on the engine it was trained on.
+    ///
+    /// ```
+    /// use a2perf_core::{ParamKind, ParamSpec, Value};
+    /// let spec = ParamSpec::new("physics", ParamKind::Str, Value::Str("rapier".into()), "engine");
+    /// assert!(!spec.follows_run && spec.follows_run().follows_run);
+    /// ```
+    pub fn follows_run(mut self) -> Self {
+        self.follows_run = true;
+        self
     }
 }
 

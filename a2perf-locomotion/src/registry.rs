@@ -75,14 +75,16 @@ fn common_params() -> Vec<ParamSpec> {
             "solver_iterations",
             ParamKind::Int,
             Value::Int(1),
-            "rapier solver iterations per 1 ms step (2: ~6x tighter joints, ~35% slower)",
-        ),
+            "solver iterations per 1 ms step (rapier: 2 gives ~6x tighter joints, ~35% slower; articulated: 4 Gauss-Seidel sweeps each)",
+        )
+        .follows_run(),
         ParamSpec::new(
             "physics",
             ParamKind::Str,
             Value::Str("rapier".into()),
-            "physics engine: rapier (13 bodies and impulse joints; every recorded result) or articulated (reduced coordinates, exact joints, about twice as fast, different trajectories)",
-        ),
+            "physics engine: rapier (13 bodies and impulse joints; every recorded result) or articulated (reduced coordinates, exact joints, about twice as fast, different trajectories); the generalization tasks follow the run's",
+        )
+        .follows_run(),
         ParamSpec::new(
             "time_limit_terminates",
             ParamKind::Bool,

@@ -222,7 +222,8 @@ pub fn from_experiment(
 /// The generalization suite of an experiment on `env_id`: the config's `generalization.tasks`,
 /// else its profile's suite for the domain, else the registry's (`None` when the domain has
 /// none). A profile's switches are filled into every task's unset parameters, so the suite runs
-/// under the same semantics as the training task.
+/// under the same semantics as the training task, and so is the run's value of every simulator
+/// setting (`ParamSpec::follows_run`, e.g. locomotion's physics engine) the list leaves unset.
 pub fn generalization_suite(
     exp: &a2perf_core::Experiment,
     env_id: &str,
@@ -243,14 +244,45 @@ pub fn generalization_suite(
     if tasks.is_empty() {
         return Ok(None);
     }
+    let run = exp.env.as_ref().map(|e| e.params.values());
     let tasks = tasks
         .iter()
-        .map(|t| match &exp.profile {
-            Some(p) => GeneralizationTask::from(&p.apply_to_task(t, registry)),
-            None => GeneralizationTask::from(t),
+        .map(|t| {
+            let mut task = match &exp.profile {
+                Some(p) => GeneralizationTask::from(&p.apply_to_task(t, registry)),
+                None => GeneralizationTask::from(t),
+            };
+            if let Some(run) = run {
+                follow_run_settings(&mut task, &t.params, run, registry);
+            }
+            task
         })
         .collect();
     Ok(Some(GeneralizationSuite { source, tasks }))
+}
+
+/// Gives `task` the run's value of each simulator setting
+/// ([`a2perf_core::ParamSpec::follows_run`]) its environment declares, where the task's value
+/// (a profile switch or the default) differs and the suite's list (`listed`) does not set it:
+/// a policy trained on one physics engine is generalized on the same one.
+fn follow_run_settings(
+    task: &mut GeneralizationTask,
+    listed: &BTreeMap<String, Value>,
+    run: &BTreeMap<String, Value>,
+    registry: &a2perf_core::Registry,
+) {
+    let Ok(entry) = registry.env(&task.env_id) else {
+        return;
+    };
+    for spec in entry.params.iter().filter(|s| s.follows_run) {
+        let Some(value) = run.get(spec.name) else {
+            continue;
+        };
+        let current = task.params.get(spec.name).unwrap_or(&spec.default);
+        if current != value && !listed.contains_key(spec.name) {
+            task.params.insert(spec.name.to_string(), value.clone());
+        }
+    }
 }
 
 /// Checks a name that becomes a directory (an experiment, a suite): letters, digits, `-`, `_`

@@ -528,3 +528,44 @@ fn the_circuit_suite_is_the_paper_suites_circuit_half() {
         assert_eq!(key(c), key(p));
     }
 }
+
+/// A run's physics engine goes with it to its generalization tasks (`ParamSpec::follows_run`):
+/// set on the training task (`--set env.physics=...`), through the profile, or back to the
+/// default against a profile switch; a task whose list sets the engine keeps it; and a run on
+/// the default engine leaves its tasks' parameters as they were.
+#[test]
+fn generalization_tasks_follow_the_runs_physics_engine() {
+    let registry = full_registry();
+    let file = root().join("configs/paper/quadruped_locomotion/dog_pace/sac.ron");
+    let engines = |sets: &[&str]| -> Vec<Option<Value>> {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        let mut loaded = load_plans(std::slice::from_ref(&file), &sets, None, &registry).unwrap();
+        let plan = loaded.plans.remove(0);
+        let suite = plan.generalization.suite.expect("suite planned");
+        assert_eq!(suite.tasks.len(), 3);
+        suite
+            .tasks
+            .iter()
+            .map(|t| t.params.get("physics").cloned())
+            .collect()
+    };
+    let art = Some(Value::Str("articulated".into()));
+    let rapier = Some(Value::Str("rapier".into()));
+    assert_eq!(engines(&[]), vec![None, None, None]);
+    assert_eq!(
+        engines(&["env.physics=\"articulated\""]),
+        vec![art.clone(); 3]
+    );
+    let profile = "profile.env.quadruped_locomotion.physics=\"articulated\"";
+    assert_eq!(engines(&[profile]), vec![art.clone(); 3]);
+    assert_eq!(
+        engines(&[profile, "env.physics=\"rapier\""]),
+        vec![rapier.clone(); 3]
+    );
+    // A suite that lists the engine of a task keeps it.
+    let listed = "generalization.tasks=[(env: \"QuadrupedLocomotion-DogPace-v0\", name: \"pace_on_rapier\", params: (physics: \"rapier\")), (env: \"QuadrupedLocomotion-DogTrot-v0\", name: \"trot\"), (env: \"QuadrupedLocomotion-DogSpin-v0\", name: \"spin\")]";
+    assert_eq!(
+        engines(&[listed, "env.physics=\"articulated\""]),
+        vec![rapier, art.clone(), art]
+    );
+}
