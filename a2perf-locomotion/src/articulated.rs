@@ -5,19 +5,21 @@
 //! One step of `dt` (semi-implicit Euler, as rapier and MuJoCo's default):
 //! 1. forward kinematics of the tree;
 //! 2. the joint-space mass matrix `M` (summed from each body's COM and rotation Jacobians) and
-//!    the bias forces `h` (Coriolis, centrifugal and gravity, one recursive pass at zero
-//!    acceleration), then `u* = u + dt·M⁻¹(τ − h)` through a Cholesky factor of `M`;
+//!    the bias forces `h` (Coriolis, centrifugal, gyroscopic and gravity, one recursive pass at
+//!    zero acceleration), then `u* = u + dt·M⁻¹(τ − h)` through a Cholesky factor of `M`;
 //! 3. velocity-level impulses for the unilateral constraints — ground contacts (normal and a
 //!    Coulomb disk), joint limits and the knees' dry friction — by projected Gauss–Seidel on
 //!    the constraint rows, warm-started from the previous step's contact impulses;
 //! 4. positions from the new velocities (base rotation by the exponential map).
 //!
-//! Contacts follow rapier 0.36's defaults for contacts with a fixed body, so that the two
-//! engines agree on what touches: a point within the 2 cm prediction distance of the ground is
-//! in contact (speculatively while above it), penetration beyond 5 mm is pushed out at
-//! `erp/dt` of a 60 Hz, ζ = 10 spring (at most 3 m/s). Collision shapes are the same simplified
-//! ones (box chassis: its corners; spheres; capsules: their end spheres) against the plane
-//! `z = 0`.
+//! Contacts: the toes are the reference's soft contacts (PyBullet's stiffness and damping, as an
+//! implicit spring-damper row, active while the toe is in the ground). Every other shape follows
+//! rapier 0.36's defaults for contacts with a fixed body: penetration beyond 5 mm is pushed out
+//! at `erp/dt` of a 60 Hz, ζ = 10 spring (at most 3 m/s), and a shape above the ground may
+//! approach it by its gap in one step (speculative contact). What counts as touching (for the
+//! termination on non-foot contact) is rapier's too: within its 2 cm prediction distance. The
+//! collision shapes are rapier's simplified ones (box chassis: its corners; spheres; capsules:
+//! their end spheres) against the plane `z = 0`.
 
 // Dense 18 × 18 linear algebra and per-joint arrays indexed side by side: index loops read as the
 // formulas they implement.
