@@ -559,10 +559,9 @@ impl Articulated {
         self.dynamics(&f, &mut m, &mut h);
         if !cholesky(&mut m) {
             // A degenerate mass matrix cannot come from positive masses and inertias; keep the
-            // state rather than write NaN into it.
+            // state rather than write NaN into it. From here `m` holds the factor `L`.
             return;
         }
-        let l = m;
         let mut u = [0.0; ND];
         let mut acc = [0.0; ND];
         for i in 0..3 {
@@ -575,7 +574,7 @@ impl Articulated {
             u[6 + j] = self.qd[j];
             acc[6 + j] = tau[j] - h[6 + j];
         }
-        cholesky_solve(&l, &mut acc);
+        cholesky_solve(&m, &mut acc);
         for i in 0..ND {
             u[i] += dt * acc[i];
         }
@@ -615,11 +614,11 @@ impl Articulated {
             let n = self.rows.n;
             point_rows[pi] = n;
             let jn = self.point_row(&f, cp.body, &x, &Vector3::z());
-            self.push_row(&l, jn, target, soft, RowKind::Unilateral);
+            self.push_row(&m, jn, target, soft, RowKind::Unilateral);
             let jx = self.point_row(&f, cp.body, &x, &Vector3::x());
-            self.push_row(&l, jx, 0.0, 0.0, RowKind::Tangent { normal: n, mu });
+            self.push_row(&m, jx, 0.0, 0.0, RowKind::Tangent { normal: n, mu });
             let jy = self.point_row(&f, cp.body, &x, &Vector3::y());
-            self.push_row(&l, jy, 0.0, 0.0, RowKind::Tangent2);
+            self.push_row(&m, jy, 0.0, 0.0, RowKind::Tangent2);
         }
         for j in 0..NUM_MOTORS {
             let (lo, hi) = self.limits[j];
@@ -627,18 +626,18 @@ impl Articulated {
             let mut e = [0.0; ND];
             if q - lo < reach {
                 e[6 + j] = 1.0;
-                self.push_row(&l, e, (lo - q) / dt, 0.0, RowKind::Unilateral);
+                self.push_row(&m, e, (lo - q) / dt, 0.0, RowKind::Unilateral);
             }
             if hi - q < reach {
                 e[6 + j] = -1.0;
-                self.push_row(&l, e, (q - hi) / dt, 0.0, RowKind::Unilateral);
+                self.push_row(&m, e, (q - hi) / dt, 0.0, RowKind::Unilateral);
             }
         }
         for (leg, fr) in self.knee_friction.into_iter().enumerate() {
             if fr > 0.0 {
                 let mut e = [0.0; ND];
                 e[6 + 3 * leg + 2] = 1.0;
-                self.push_row(&l, e, 0.0, 0.0, RowKind::Boxed { bound: fr * dt });
+                self.push_row(&m, e, 0.0, 0.0, RowKind::Boxed { bound: fr * dt });
             }
         }
 

@@ -222,16 +222,12 @@ impl Simulation {
     pub fn new(model: &RobotModel, config: SimConfig) -> Self {
         let engine = match config.physics {
             Physics::Rapier => Engine::Rapier(Box::new(Rapier::new(model, &config))),
-            Physics::Articulated => {
-                let mut a = Articulated::new(model, config.dt, config.solver_iterations);
-                let (x, y, z) = model.init_position;
-                a.set_state(&RobotState {
-                    base_pos: Vector3::new(x, y, z),
-                    q: model.default_urdf_angles(),
-                    ..RobotState::default()
-                });
-                Engine::Articulated(Box::new(a))
-            }
+            // Built at the initial position and default pose, at rest.
+            Physics::Articulated => Engine::Articulated(Box::new(Articulated::new(
+                model,
+                config.dt,
+                config.solver_iterations,
+            ))),
         };
         Self {
             config,
