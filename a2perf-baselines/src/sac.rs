@@ -197,8 +197,10 @@ struct Critic {
     ws_t: MlpWs,
     /// Output gradient of the current pass (one per row).
     dq: Vec<f32>,
-    /// Input gradient of the actor's pass (`[batch, obs + action]`).
+    /// Action gradient of the actor's pass (`[rows, action]`).
     dqin: Vec<f32>,
+    /// The rows of the actor's pass on which this critic is the minimum.
+    rows: Vec<usize>,
 }
 
 impl Critic {
@@ -304,6 +306,8 @@ struct SacRun {
     logp: Vec<f32>,
     y: Vec<f32>,
     dout: Vec<f32>,
+    /// A zero action gradient (`[action]`), for the rows a critic is not the minimum on.
+    zero_da: Vec<f32>,
     total: u64,
     env_steps: u64,
     /// Gradient updates earned and not yet made (`updates_per_step` per environment step).
@@ -345,6 +349,7 @@ impl SacRun {
                     ws_t: MlpWs::default(),
                     dq: Vec::new(),
                     dqin: Vec::new(),
+                    rows: Vec::new(),
                 }
             })
             .collect();
@@ -397,6 +402,7 @@ impl SacRun {
             logp: Vec::new(),
             y: Vec::new(),
             dout: Vec::new(),
+            zero_da: vec![0.0; d],
             total: ctx.settings().total_env_steps.max(1),
             env_steps: 0,
             credit: 0.0,
@@ -608,28 +614,41 @@ impl SacRun {
         ensure(&mut self.dout, b * 2 * d);
         self.dout[..b * 2 * d].fill(0.0);
         {
-            // Gradient flows through whichever critic is the minimum for each row.
+            // Gradient flows through whichever critic is the minimum for each row: each critic
+            // keeps its rows (the rest would carry a zero gradient through it).
             let (c0, c1) = self.critics.split_at_mut(1);
             let (c0, c1) = (&mut c0[0], &mut c1[0]);
-            ensure(&mut c0.dq, b);
-            ensure(&mut c1.dq, b);
+            c0.rows.clear();
+            c1.rows.clear();
             let (qa, qb) = (qnet.output(&c0.ws), qnet.output(&c1.ws));
             for k in 0..b {
-                let first = qa[k] <= qb[k];
-                c0.dq[k] = if first { -1.0 / b as f32 } else { 0.0 };
-                c1.dq[k] = if first { 0.0 } else { -1.0 / b as f32 };
+                if qa[k] <= qb[k] {
+                    c0.rows.push(k);
+                } else {
+                    c1.rows.push(k);
+                }
             }
         }
-        // The actor needs each critic's gradient with respect to its input (the action) only:
-        // no parameter gradients. The two side by side, each into its own buffer.
+        // The actor needs each critic's gradient with respect to the action columns of its
+        // input only, on the rows where it is the minimum: no parameter gradients, no
+        // observation columns. The two side by side, each into its own buffer.
         self.critics.par_iter_mut().for_each(|c| {
-            ensure(&mut c.dqin, b * (od + d));
-            qnet.backward_input(&c.params, &c.dq, &mut c.ws, &mut c.dqin);
+            let n = c.rows.len();
+            ensure(&mut c.dq, n);
+            c.dq[..n].fill(-1.0 / b as f32);
+            ensure(&mut c.dqin, n * d);
+            qnet.keep_rows(&mut c.ws, &c.rows);
+            qnet.backward_input_cols(&c.params, &c.dq[..n], &mut c.ws, od..od + d, &mut c.dqin);
         });
-        // Then their contributions, critic 0's first, as when one thread did it all.
+        // Then their contributions, critic 0's first, as when one thread did it all (a row
+        // the critic is not the minimum on contributes a zero action gradient).
         for (ci, c) in self.critics.iter().enumerate() {
+            let mut kept = c.rows.iter().enumerate().peekable();
             for k in 0..b {
-                let da = &c.dqin[k * (od + d) + od..(k + 1) * (od + d)];
+                let da = match kept.next_if(|(_, r)| **r == k) {
+                    Some((j, _)) => &c.dqin[j * d..(j + 1) * d],
+                    None => &self.zero_da[..d],
+                };
                 let row = &out[k * 2 * d..(k + 1) * 2 * d];
                 let (dm, dr) = self.dout[k * 2 * d..(k + 1) * 2 * d].split_at_mut(d);
                 let dlogp = if ci == 0 { alpha / b as f32 } else { 0.0 };

@@ -493,3 +493,51 @@ proptest! {
         prop_assert_eq!(bits(&dx), bits(&alone));
     }
 }
+
+/// SAC's actor step takes each critic's action gradient on the rows where it is the minimum
+/// only (`Mlp::keep_rows`, `Mlp::backward_input_cols`): at the paper's critic dimensions
+/// (160 observation + 12 action inputs, 512-256 hidden, batch 256) those values must be bit
+/// for bit the full backward pass's, where the dropped rows carry a zero output gradient, or
+/// the pinned training runs would move.
+#[test]
+fn kept_rows_action_gradient_equals_the_full_pass_bit_for_bit() {
+    let (od, d, b) = (160, 12, 256);
+    let mut alloc = ParamAlloc::new();
+    let mlp = Mlp::new(&mut alloc, &[od + d, 512, 256, 1], Activation::Relu);
+    let mut params = vec![0.0; alloc.len()];
+    let mut rng = RngStream::new(7, "test/kept_rows");
+    mlp.init(&mut params, &mut rng, 1.0);
+    let x: Vec<f32> = (0..b * (od + d)).map(|_| rng.normal() as f32).collect();
+    let rows: Vec<usize> = (0..b).filter(|_| rng.uniform() < 0.5).collect();
+    assert!(!rows.is_empty() && rows.len() < b);
+    let g = -1.0 / b as f32;
+    let mut dout = vec![0.0; b];
+    for &r in &rows {
+        dout[r] = g;
+    }
+    let mut ws = MlpWs::default();
+    mlp.forward(&params, &x, b, &mut ws);
+    let mut full = vec![0.0; b * (od + d)];
+    mlp.backward_input(&params, &dout, &mut ws, &mut full);
+
+    mlp.forward(&params, &x, b, &mut ws);
+    mlp.keep_rows(&mut ws, &rows);
+    let mut kept = vec![0.0; rows.len() * d];
+    mlp.backward_input_cols(
+        &params,
+        &vec![g; rows.len()],
+        &mut ws,
+        od..od + d,
+        &mut kept,
+    );
+    for (j, &r) in rows.iter().enumerate() {
+        let want = &full[r * (od + d) + od..(r + 1) * (od + d)];
+        let got = &kept[j * d..(j + 1) * d];
+        assert!(
+            want.iter()
+                .zip(got)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "row {r}: {got:?} != {want:?}"
+        );
+    }
+}

@@ -200,12 +200,41 @@ impl Linear {
     /// [`backward`](Self::backward)'s, without the parameter gradients: for a caller that
     /// needs the gradient with respect to the input only (SAC's actor, through its critics).
     pub fn backward_input(&self, params: &[f32], dy: &[f32], batch: usize, dx: &mut [f32]) {
+        self.backward_input_cols(params, dy, batch, 0..self.inp, dx);
+    }
+
+    /// The input gradient's columns `cols` alone, `dx[b, cols.len()] = dy W[:, cols]`: the
+    /// same values as those columns of [`backward_input`](Self::backward_input)'s (each is a
+    /// sum over the layer's outputs in the same order), at `cols.len() / inp` of the work.
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::{Linear, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let layer = Linear::new(&mut alloc, 4, 3);
+    /// let params: Vec<f32> = (0..alloc.len()).map(|i| (i as f32 * 0.61).cos()).collect();
+    /// let dy = [0.3, -1.0, 0.5, 2.0, 0.25, -0.75];
+    /// let mut dx = [0.0; 8];
+    /// layer.backward_input(&params, &dy, 2, &mut dx);
+    /// let mut part = [0.0; 4];
+    /// layer.backward_input_cols(&params, &dy, 2, 1..3, &mut part);
+    /// assert_eq!(part, [dx[1], dx[2], dx[5], dx[6]]);
+    /// ```
+    pub fn backward_input_cols(
+        &self,
+        params: &[f32],
+        dy: &[f32],
+        batch: usize,
+        cols: std::ops::Range<usize>,
+        dx: &mut [f32],
+    ) {
         if batch == 0 {
             return;
         }
+        let n = cols.len();
         let dym = MatRef::from_row_major_slice(&dy[..batch * self.out], batch, self.out);
-        let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp);
-        let dxm = MatMut::from_row_major_slice_mut(&mut dx[..batch * self.inp], batch, self.inp);
+        let wm = MatRef::from_row_major_slice(&params[self.w_range()], self.out, self.inp)
+            .subcols(cols.start, n);
+        let dxm = MatMut::from_row_major_slice_mut(&mut dx[..batch * n], batch, n);
         gemm(dxm, Accum::Replace, dym, wm);
     }
 }
@@ -389,6 +418,49 @@ impl Mlp {
         ws.outs.last().map_or(&[][..], |o| &o[..batch * self.out()])
     }
 
+    /// Keeps the rows `rows` (ascending, each below the last pass's batch) of the last forward
+    /// pass in `ws` and drops the others, as if that pass had run on those rows alone: a
+    /// backward pass then costs what the kept rows need. Each row's activations depend on its
+    /// own input only, so the kept ones are bit for bit those of a pass over the kept rows.
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::{Activation, Mlp, MlpWs, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let mlp = Mlp::new(&mut alloc, &[2, 3, 1], Activation::Relu);
+    /// let params: Vec<f32> = (0..alloc.len()).map(|i| (i as f32 * 0.37).sin()).collect();
+    /// let x = [0.5, -1.0, 2.0, 0.25, -0.5, 1.5];
+    /// let mut ws = MlpWs::default();
+    /// mlp.forward(&params, &x, 3, &mut ws);
+    /// let all = mlp.output(&ws).to_vec();
+    /// mlp.keep_rows(&mut ws, &[0, 2]);
+    /// assert_eq!(mlp.output(&ws), [all[0], all[2]]);
+    /// let (mut dx, mut dx_all) = ([0.0; 4], [0.0; 6]);
+    /// mlp.backward_input(&params, &[1.0, 1.0], &mut ws, &mut dx);
+    /// mlp.forward(&params, &x, 3, &mut ws);
+    /// mlp.backward_input(&params, &[1.0, 0.0, 1.0], &mut ws, &mut dx_all);
+    /// assert_eq!(dx, [dx_all[0], dx_all[1], dx_all[4], dx_all[5]]);
+    /// ```
+    ///
+    /// # Panics
+    ///
+    /// If `rows` does not ascend or names a row at or past the last pass's batch.
+    pub fn keep_rows(&self, ws: &mut MlpWs, rows: &[usize]) {
+        assert!(
+            rows.windows(2).all(|w| w[0] < w[1]) && rows.last().is_none_or(|&r| r < ws.batch),
+            "Mlp::keep_rows: rows must ascend and lie below the batch ({})",
+            ws.batch
+        );
+        for (out, layer) in ws.outs.iter_mut().zip(&self.layers) {
+            let w = layer.out;
+            for (j, &r) in rows.iter().enumerate() {
+                if j != r {
+                    out.copy_within(r * w..(r + 1) * w, j * w);
+                }
+            }
+        }
+        ws.batch = rows.len();
+    }
+
     /// The output of the last [`forward`](Self::forward).
     pub fn output<'w>(&self, ws: &'w MlpWs) -> &'w [f32] {
         ws.outs
@@ -516,12 +588,41 @@ impl Mlp {
     /// assert_eq!(dx, dx_alone);
     /// ```
     pub fn backward_input(&self, params: &[f32], dout: &[f32], ws: &mut MlpWs, dx: &mut [f32]) {
+        let inp = self.layers.first().map_or(0, |l| l.inp);
+        self.backward_input_cols(params, dout, ws, 0..inp, dx);
+    }
+
+    /// The input gradient's columns `cols` alone (`dx` `[batch, cols.len()]`), the same values
+    /// as those columns of [`backward_input`](Self::backward_input)'s: for a caller that needs
+    /// the gradient with respect to part of the input (SAC's actor: a critic's action columns).
+    ///
+    /// ```
+    /// use a2perf_baselines::nn::{Activation, Mlp, MlpWs, ParamAlloc};
+    /// let mut alloc = ParamAlloc::new();
+    /// let mlp = Mlp::new(&mut alloc, &[3, 4, 1], Activation::Relu);
+    /// let params: Vec<f32> = (0..alloc.len()).map(|i| (i as f32 * 0.37).sin()).collect();
+    /// let mut ws = MlpWs::default();
+    /// mlp.forward(&params, &[0.5, -1.0, 2.0], 1, &mut ws);
+    /// let mut dx = [0.0; 3];
+    /// mlp.backward_input(&params, &[1.0], &mut ws, &mut dx);
+    /// let mut last = [0.0; 1];
+    /// mlp.backward_input_cols(&params, &[1.0], &mut ws, 2..3, &mut last);
+    /// assert_eq!(last[0], dx[2]);
+    /// ```
+    pub fn backward_input_cols(
+        &self,
+        params: &[f32],
+        dout: &[f32],
+        ws: &mut MlpWs,
+        cols: std::ops::Range<usize>,
+        dx: &mut [f32],
+    ) {
         let batch = ws.batch;
         let Some(first) = self.layers.first() else {
             return;
         };
         let d = self.backward_layers(params, None, dout, ws);
-        first.backward_input(params, d, batch, dx);
+        first.backward_input_cols(params, d, batch, cols, dx);
     }
 
     /// [`backward_to_first`](Self::backward_to_first), accumulating parameter gradients only
