@@ -162,6 +162,10 @@ pub struct ObsBatch {
     mask: Vec<bool>,
     mask_width: usize,
     len: usize,
+    /// Per tensor, per row: the values from this index on are zero, as the last
+    /// [`write_trimmed`](Self::write_trimmed) left them (`u32::MAX`: not known; any other
+    /// write forgets it).
+    zero_from: Vec<Vec<u32>>,
 }
 
 impl ObsBatch {
@@ -184,6 +188,7 @@ impl ObsBatch {
             mask: Vec::new(),
             mask_width: layout.num_actions.unwrap_or(0),
             len: 0,
+            zero_from: Vec::new(),
         }
     }
 
@@ -208,6 +213,76 @@ impl ObsBatch {
         for (i, (w, d)) in self.widths.iter_mut().zip(&self.dims).enumerate() {
             *w = if keep.contains(&i) { *d } else { 0 };
         }
+        // The rows' places move with the widths.
+        self.zero_from.clear();
+    }
+
+    /// Forgets what [`write_trimmed`](Self::write_trimmed) knew of row `row`'s zeros (tensor
+    /// `i`, or every tensor).
+    fn forget_zeros(&mut self, i: Option<usize>, row: usize) {
+        for (t, z) in self.zero_from.iter_mut().enumerate() {
+            if i.is_none_or(|i| i == t)
+                && let Some(z) = z.get_mut(row)
+            {
+                *z = u32::MAX;
+            }
+        }
+    }
+
+    /// Writes row `row` of tensor `i` as `nz` leading values, written by `floats` (a float
+    /// tensor) or `ints` (an integer one) into the row's first `nz` places, followed by zeros.
+    /// Only the places the last such write of this row did not leave zero are cleared, so a
+    /// row that is mostly trailing zeros (a web page's empty element slots) costs what its
+    /// values do. Nothing is written for a tensor left out by
+    /// [`keep_tensors`](Self::keep_tensors).
+    ///
+    /// ```
+    /// use a2perf_baselines::batch::{ObsBatch, ObsLayout};
+    ///
+    /// let layout = ObsLayout::floats(vec![("x".into(), vec![4])], None);
+    /// let mut batch = ObsBatch::new(&layout);
+    /// batch.resize(1);
+    /// batch.write_trimmed(0, 0, 3, |d| d.copy_from_slice(&[1.0, 2.0, 3.0]), |_| {});
+    /// batch.write_trimmed(0, 0, 1, |d| d[0] = 5.0, |_| {});
+    /// assert_eq!(batch.tensor_row(0, 0), [5.0, 0.0, 0.0, 0.0]);
+    /// batch.row_mut(0, 0).fill(7.0);
+    /// batch.write_trimmed(0, 0, 2, |d| d.copy_from_slice(&[1.0, 2.0]), |_| {});
+    /// assert_eq!(batch.tensor_row(0, 0), [1.0, 2.0, 0.0, 0.0]);
+    /// ```
+    pub fn write_trimmed(
+        &mut self,
+        i: usize,
+        row: usize,
+        nz: usize,
+        floats: impl FnOnce(&mut [f32]),
+        ints: impl FnOnce(&mut [i32]),
+    ) {
+        let d = self.widths[i];
+        if d == 0 {
+            return;
+        }
+        let nz = nz.min(d);
+        if self.zero_from.len() != self.dims.len() {
+            self.zero_from = vec![Vec::new(); self.dims.len()];
+        }
+        let known = &mut self.zero_from[i];
+        if known.len() <= row {
+            known.resize(row + 1, u32::MAX);
+        }
+        let clear_to = (known[row] as usize).min(d).max(nz);
+        match &mut self.data[i] {
+            Rows::F32(v) => {
+                let r = &mut v[row * d..(row + 1) * d];
+                floats(&mut r[..nz]);
+                r[nz..clear_to].fill(0.0);
+            }
+            Rows::I32(v) => {
+                let r = &mut v[row * d..(row + 1) * d];
+                ints(&mut r[..nz]);
+                r[nz..clear_to].fill(0);
+            }
+        }
+        known[row] = nz as u32;
     }
 
     /// Rows in use.
@@ -266,6 +341,9 @@ impl ObsBatch {
                 )));
             }
             let width = self.widths[i];
+            if let Some(z) = self.zero_from.get_mut(i).and_then(|z| z.get_mut(row)) {
+                *z = u32::MAX;
+            }
             let at = row * width..(row + 1) * width;
             let s = ..width;
             match (&mut self.data[i], &t.data) {
@@ -307,6 +385,7 @@ impl ObsBatch {
     /// Copies row `src_row` of `src` (same layout, keeping at least the tensors `self` keeps)
     /// into row `row` of `self`.
     pub fn copy_row(&mut self, row: usize, src: &ObsBatch, src_row: usize) {
+        self.forget_zeros(None, row);
         for (i, (dim, from)) in self.widths.iter().zip(&src.widths).enumerate() {
             self.data[i].copy_range(row * dim, &src.data[i], src_row * from, *dim);
         }
@@ -373,6 +452,7 @@ impl ObsBatch {
     /// Row `row` of float tensor `i`, mutable (for normalisation in place; empty for an integer
     /// tensor).
     pub fn row_mut(&mut self, i: usize, row: usize) -> &mut [f32] {
+        self.forget_zeros(Some(i), row);
         let d = self.widths[i];
         match &mut self.data[i] {
             Rows::F32(v) => &mut v[row * d..(row + 1) * d],
@@ -382,6 +462,7 @@ impl ObsBatch {
 
     /// Row `row` of integer tensor `i`, mutable (empty for a float tensor).
     pub fn int_row_mut(&mut self, i: usize, row: usize) -> &mut [i32] {
+        self.forget_zeros(Some(i), row);
         let d = self.widths[i];
         match &mut self.data[i] {
             Rows::I32(v) => &mut v[row * d..(row + 1) * d],

@@ -197,6 +197,20 @@ impl Column {
         }
     }
 
+    /// The length of the row `[at, at + n)` without its trailing zeros (values whose bits are
+    /// all zero: `-0.0` is not one).
+    fn nz_len(&self, at: usize, n: usize) -> usize {
+        fn last<T: Copy>(v: &[T], zero: impl Fn(T) -> bool) -> usize {
+            v.iter().rposition(|x| !zero(*x)).map_or(0, |k| k + 1)
+        }
+        match self {
+            Column::U8(v) => last(&v[at..at + n], |x| x == 0),
+            Column::U16(v) => last(&v[at..at + n], |x| x == 0),
+            Column::F32(v) => last(&v[at..at + n], |x| x.to_bits() == 0),
+            Column::I32(v) => last(&v[at..at + n], |x| x == 0),
+        }
+    }
+
     fn read_ints(&self, at: usize, dst: &mut [i32]) {
         let n = dst.len();
         match self {
@@ -391,6 +405,9 @@ pub(crate) struct ObsStore {
     /// Per tensor: whether it holds integers (its column widens to `i32`, not `f32`).
     integer: Vec<bool>,
     tensors: Vec<Stored>,
+    /// Per tensor, per slot: the length of the slot's row without its trailing zeros (a web
+    /// page's 250 element slots are mostly empty), so that reads decode only that much.
+    nz: Vec<Vec<u32>>,
     /// Action masks, one bit per action, `words` u64 per slot.
     mask: Vec<u64>,
     words: usize,
@@ -404,6 +421,7 @@ impl ObsStore {
         let mask_width = layout.num_actions.unwrap_or(0);
         Self {
             tensors: dims.iter().map(|_| Stored::Empty).collect(),
+            nz: dims.iter().map(|_| Vec::new()).collect(),
             integer: (0..dims.len()).map(|i| layout.is_integer(i)).collect(),
             dims,
             mask: Vec::new(),
@@ -438,6 +456,11 @@ impl ObsStore {
         let slots = self.refs.len();
         for (i, (t, d)) in self.tensors.iter_mut().zip(&self.dims).enumerate() {
             t.write(slot, *d, slots, values_of(src, i, row));
+            let nz = &mut self.nz[i];
+            if nz.len() < slots {
+                nz.resize(slots, 0);
+            }
+            nz[slot] = t.at(slot, *d).map_or(0, |(c, at)| c.nz_len(at, *d)) as u32;
         }
         if let Some(m) = src.mask(row) {
             let bits = &mut self.mask[slot * self.words..(slot + 1) * self.words];
@@ -498,15 +521,19 @@ impl ObsStore {
     }
 
     /// Decodes tensor `i` of `slot` into row `row` of `out`.
+    /// Only the row's values before its trailing zeros are decoded; the batch zeroes the rest
+    /// where its last write through here did not leave zeros ([`ObsBatch::write_trimmed`]).
     pub(crate) fn read_tensor(&self, slot: usize, i: usize, out: &mut ObsBatch, row: usize) {
         let Some((c, at)) = self.tensors[i].at(slot, self.dims[i]) else {
             return;
         };
-        if out.is_integer(i) {
-            c.read_ints(at, out.int_row_mut(i, row));
-        } else {
-            c.read_floats(at, out.row_mut(i, row));
-        }
+        out.write_trimmed(
+            i,
+            row,
+            self.nz[i][slot] as usize,
+            |dst| c.read_floats(at, dst),
+            |dst| c.read_ints(at, dst),
+        );
     }
 
     /// Decodes the action mask of `slot` into row `row` of `out` (nothing without a mask).
@@ -616,10 +643,20 @@ impl ObsStore {
         if !columns_fit || mask.len() != slots * words || free.iter().any(|f| *f >= slots) {
             return Err(resume_err("replay buffer: inconsistent observation store"));
         }
+        let nz = tensors
+            .iter()
+            .zip(&dims)
+            .map(|(t, &d)| {
+                (0..slots)
+                    .map(|slot| t.at(slot, d).map_or(0, |(c, at)| c.nz_len(at, d)) as u32)
+                    .collect()
+            })
+            .collect();
         Ok(ObsStore {
             dims,
             integer: self.integer.clone(),
             tensors,
+            nz,
             mask,
             words,
             refs,
@@ -646,6 +683,58 @@ const BYTE_FLAGS: [[bool; 8]; 256] = {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use a2perf_core::DType;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Reads decode a row up to its trailing zeros and clear what an earlier read into the
+        /// same batch row left there: whatever order rows of different lengths (and a float
+        /// `-0.0`, which is not a zero) are read in, and whatever was written into the batch
+        /// row in between, every read gives back the stored row bit for bit.
+        #[test]
+        fn trimmed_reads_give_back_every_row_bit_for_bit(
+            lens in prop::collection::vec(0usize..=12, 1..6),
+            reads in prop::collection::vec((0usize..6, any::<bool>()), 1..20),
+        ) {
+            let layout = ObsLayout {
+                tensors: vec![("f".into(), vec![12]), ("i".into(), vec![12])],
+                dtypes: vec![DType::F32, DType::I32],
+                num_actions: None,
+            };
+            let mut src = ObsBatch::new(&layout);
+            src.resize(lens.len());
+            for (r, &n) in lens.iter().enumerate() {
+                let f = src.row_mut(0, r);
+                f.fill(0.0);
+                for (k, v) in f[..n].iter_mut().enumerate() {
+                    *v = if k % 3 == 1 { 0.0 } else { (k + r) as f32 * 0.5 + 0.25 };
+                }
+                if n > 0 && n % 2 == 0 {
+                    f[n - 1] = -0.0;
+                }
+                let i = src.int_row_mut(1, r);
+                i.fill(0);
+                for (k, v) in i[..n].iter_mut().enumerate() {
+                    *v = (k * 7 + r) as i32 - 3;
+                }
+            }
+            let mut store = ObsStore::new(&layout);
+            let slots: Vec<usize> = (0..lens.len()).map(|r| store.insert(&src, r)).collect();
+            let mut out = ObsBatch::new(&layout);
+            out.resize(1);
+            for (pick, scribble) in reads {
+                let r = pick % lens.len();
+                if scribble {
+                    out.row_mut(0, 0).fill(9.0);
+                    out.int_row_mut(1, 0).fill(9);
+                }
+                store.read(slots[r], &mut out, 0);
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                prop_assert_eq!(bits(out.tensor_row(0, 0)), bits(src.tensor_row(0, r)));
+                prop_assert_eq!(out.int_row(1, 0), src.int_row(1, r));
+            }
+        }
+    }
 
     #[test]
     fn masks_round_trip_across_word_and_byte_boundaries() {
