@@ -570,11 +570,12 @@ impl ObsStore {
         }
     }
 
-    /// Bytes reserved (tensor columns, mask bits and slot bookkeeping).
+    /// Bytes reserved (tensor columns, mask bits, the rows' lengths and slot bookkeeping).
     pub(crate) fn bytes(&self) -> usize {
         self.tensors.iter().map(Stored::bytes).sum::<usize>()
             + self.mask.capacity() * 8
             + self.refs.capacity() * 4
+            + self.nz.iter().map(|v| v.capacity() * 4).sum::<usize>()
             + self.free.capacity() * std::mem::size_of::<usize>()
     }
 

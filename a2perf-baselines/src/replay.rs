@@ -135,7 +135,8 @@ impl ReplayBuffer {
         self.store.live()
     }
 
-    /// Bytes reserved for observations (tensor columns, mask bits and slot bookkeeping).
+    /// Bytes reserved for observations (tensor columns, mask bits, the rows' lengths and slot
+    /// bookkeeping).
     pub fn observation_bytes(&self) -> usize {
         self.store.bytes()
     }
