@@ -521,6 +521,7 @@ impl ObsStore {
     }
 
     /// Decodes tensor `i` of `slot` into row `row` of `out`.
+    ///
     /// Only the row's values before its trailing zeros are decoded; the batch zeroes the rest
     /// where its last write through here did not leave zeros ([`ObsBatch::write_trimmed`]).
     pub(crate) fn read_tensor(&self, slot: usize, i: usize, out: &mut ObsBatch, row: usize) {
