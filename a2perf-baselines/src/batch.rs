@@ -166,6 +166,9 @@ pub struct ObsBatch {
     /// [`write_trimmed`](Self::write_trimmed) left them (`u32::MAX`: not known; any other
     /// write forgets it).
     zero_from: Vec<Vec<u32>>,
+    /// Per row: the mask's actions from this index on are illegal, as the last
+    /// [`write_mask_trimmed`](Self::write_mask_trimmed) left them (`u32::MAX`: not known).
+    illegal_from: Vec<u32>,
 }
 
 impl ObsBatch {
@@ -189,6 +192,7 @@ impl ObsBatch {
             mask_width: layout.num_actions.unwrap_or(0),
             len: 0,
             zero_from: Vec::new(),
+            illegal_from: Vec::new(),
         }
     }
 
@@ -285,6 +289,55 @@ impl ObsBatch {
         known[row] = nz as u32;
     }
 
+    /// Forgets what [`write_mask_trimmed`](Self::write_mask_trimmed) knew of row `row`'s mask.
+    fn forget_illegal(&mut self, row: usize) {
+        if let Some(k) = self.illegal_from.get_mut(row) {
+            *k = u32::MAX;
+        }
+    }
+
+    /// Writes row `row`'s action mask as `n` leading flags, written by `fill` into the mask's
+    /// first `n` places, followed by illegal actions; only the places the last such write of
+    /// this row did not leave illegal are cleared (a web page's mask has 12,500 actions, its
+    /// legal ones all among the first few hundred). Nothing happens without a mask.
+    ///
+    /// ```
+    /// use a2perf_baselines::batch::{ObsBatch, ObsLayout};
+    ///
+    /// let layout = ObsLayout::floats(vec![("x".into(), vec![1])], Some(5));
+    /// let mut batch = ObsBatch::new(&layout);
+    /// batch.resize(1);
+    /// batch.write_mask_trimmed(0, 2, |m| m.copy_from_slice(&[false, true]));
+    /// assert_eq!(batch.mask(0), Some(&[false, true, false, false, false][..]));
+    /// assert_eq!(batch.legal_end(0), 2);
+    /// ```
+    pub fn write_mask_trimmed(&mut self, row: usize, n: usize, fill: impl FnOnce(&mut [bool])) {
+        let w = self.mask_width;
+        if w == 0 {
+            return;
+        }
+        let n = n.min(w);
+        if self.illegal_from.len() <= row {
+            self.illegal_from.resize(row + 1, u32::MAX);
+        }
+        let clear_to = (self.illegal_from[row] as usize).min(w).max(n);
+        let m = &mut self.mask[row * w..(row + 1) * w];
+        fill(&mut m[..n]);
+        m[n..clear_to].fill(false);
+        self.illegal_from[row] = n as u32;
+    }
+
+    /// An index from which every action of row `row`'s mask is known illegal: where the last
+    /// [`write_mask_trimmed`](Self::write_mask_trimmed) of the row ended them, else the mask's
+    /// width (0 without a mask). A masked argmax over the actions before it picks what it picks
+    /// over all of them.
+    pub fn legal_end(&self, row: usize) -> usize {
+        let w = self.mask_width;
+        self.illegal_from
+            .get(row)
+            .map_or(w, |&k| (k as usize).min(w))
+    }
+
     /// Rows in use.
     pub fn len(&self) -> usize {
         self.len
@@ -367,6 +420,7 @@ impl ObsBatch {
         }
         let w = self.mask_width;
         if w > 0 {
+            self.forget_illegal(row);
             let m = &mut self.mask[row * w..(row + 1) * w];
             match &obs.action_mask {
                 Some(src) if src.len() == w => m.copy_from_slice(src),
@@ -391,6 +445,7 @@ impl ObsBatch {
         }
         let w = self.mask_width;
         if w > 0 {
+            self.forget_illegal(row);
             self.mask[row * w..(row + 1) * w]
                 .copy_from_slice(&src.mask[src_row * w..(src_row + 1) * w]);
         }
@@ -445,6 +500,7 @@ impl ObsBatch {
 
     /// Legal-action mask of row `row`, mutable (`None` for continuous action spaces).
     pub fn mask_mut(&mut self, row: usize) -> Option<&mut [bool]> {
+        self.forget_illegal(row);
         let w = self.mask_width;
         (w > 0).then(|| &mut self.mask[row * w..(row + 1) * w])
     }

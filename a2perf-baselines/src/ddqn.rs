@@ -374,7 +374,15 @@ impl DdqnRun {
         for k in 0..b {
             let row = &net.logits()[k * m..(k + 1) * m];
             let best = match scored {
-                None => masked::argmax(row, sample.next.mask(k)),
+                // Every action from `legal_end` on is illegal (the replay's mask read knows
+                // where a page's legal actions end): the argmax over the actions before it.
+                None => {
+                    let end = sample.next.legal_end(k).min(m);
+                    match sample.next.mask(k) {
+                        Some(mask) => masked::argmax(&row[..end], Some(&mask[..end])),
+                        None => masked::argmax(row, None),
+                    }
+                }
                 // Column `j` is legal as its action is (`argmax_at` over the whole mask).
                 Some(_) => masked::argmax(row, Some(&sample.next_legal[k * m..(k + 1) * m])),
             };

@@ -410,6 +410,8 @@ pub(crate) struct ObsStore {
     nz: Vec<Vec<u32>>,
     /// Action masks, one bit per action, `words` u64 per slot.
     mask: Vec<u64>,
+    /// Per slot: the mask's words up to its last legal action's (reads decode only those).
+    mask_words: Vec<u32>,
     words: usize,
     refs: Vec<u32>,
     free: Vec<usize>,
@@ -425,6 +427,7 @@ impl ObsStore {
             integer: (0..dims.len()).map(|i| layout.is_integer(i)).collect(),
             dims,
             mask: Vec::new(),
+            mask_words: Vec::new(),
             words: mask_width.div_ceil(64),
             refs: Vec::new(),
             free: Vec::new(),
@@ -471,6 +474,10 @@ impl ObsStore {
                 }
             }
         }
+        if self.mask_words.len() < slots {
+            self.mask_words.resize(slots, 0);
+        }
+        self.mask_words[slot] = self.used_words(slot);
         slot
     }
 
@@ -538,9 +545,15 @@ impl ObsStore {
     }
 
     /// Decodes the action mask of `slot` into row `row` of `out` (nothing without a mask).
+    /// Only the words up to the last legal action's are decoded; the batch marks the rest
+    /// illegal where its last read through here did not ([`ObsBatch::write_mask_trimmed`]).
     pub(crate) fn read_mask(&self, slot: usize, out: &mut ObsBatch, row: usize) {
-        if let Some(m) = out.mask_mut(row) {
-            let bits = &self.mask[slot * self.words..(slot + 1) * self.words];
+        if self.words == 0 {
+            return;
+        }
+        let used = self.mask_words[slot] as usize;
+        let bits = &self.mask[slot * self.words..slot * self.words + used];
+        out.write_mask_trimmed(row, used * 64, |m| {
             // A byte at a time through a table: a web observation's mask has 12,500 actions
             // and a replay minibatch decodes hundreds of them per update.
             for (chunk, word) in m.chunks_mut(64).zip(bits) {
@@ -554,7 +567,13 @@ impl ObsStore {
                     }
                 }
             }
-        }
+        });
+    }
+
+    /// The words of `slot`'s mask up to and including its last non-zero one.
+    fn used_words(&self, slot: usize) -> u32 {
+        let bits = &self.mask[slot * self.words..(slot + 1) * self.words];
+        bits.iter().rposition(|w| *w != 0).map_or(0, |k| k + 1) as u32
     }
 
     /// Writes into `out` whether each of `actions` is legal in `slot`'s mask (`true` without a
@@ -571,12 +590,14 @@ impl ObsStore {
         }
     }
 
-    /// Bytes reserved (tensor columns, mask bits, the rows' lengths and slot bookkeeping).
+    /// Bytes reserved (tensor columns, mask bits, the rows' and masks' lengths and slot
+    /// bookkeeping).
     pub(crate) fn bytes(&self) -> usize {
         self.tensors.iter().map(Stored::bytes).sum::<usize>()
             + self.mask.capacity() * 8
             + self.refs.capacity() * 4
             + self.nz.iter().map(|v| v.capacity() * 4).sum::<usize>()
+            + self.mask_words.capacity() * 4
             + self.free.capacity() * std::mem::size_of::<usize>()
     }
 
@@ -654,16 +675,19 @@ impl ObsStore {
                     .collect()
             })
             .collect();
-        Ok(ObsStore {
+        let mut store = ObsStore {
             dims,
             integer: self.integer.clone(),
             tensors,
             nz,
             mask,
+            mask_words: Vec::new(),
             words,
             refs,
             free,
-        })
+        };
+        store.mask_words = (0..slots).map(|slot| store.used_words(slot)).collect();
+        Ok(store)
     }
 }
 
@@ -734,6 +758,43 @@ mod tests {
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 prop_assert_eq!(bits(out.tensor_row(0, 0)), bits(src.tensor_row(0, r)));
                 prop_assert_eq!(out.int_row(1, 0), src.int_row(1, r));
+            }
+        }
+    }
+
+    proptest! {
+        /// Masks read up to their last legal action's word, the rest marked illegal where an
+        /// earlier read into the same batch row did not leave it so: every read gives back the
+        /// stored mask, and no action from `legal_end` on is legal.
+        #[test]
+        fn trimmed_mask_reads_give_back_every_mask(
+            lasts in prop::collection::vec(prop::option::of(0usize..200), 1..6),
+            reads in prop::collection::vec((0usize..6, any::<bool>()), 1..20),
+        ) {
+            let n = 200;
+            let layout = ObsLayout::floats(vec![("x".into(), vec![1])], Some(n));
+            let mut src = ObsBatch::new(&layout);
+            src.resize(lasts.len());
+            for (r, last) in lasts.iter().enumerate() {
+                let m = src.mask_mut(r).unwrap();
+                for (a, legal) in m.iter_mut().enumerate() {
+                    *legal = last.is_some_and(|l| a == l || (a < l && (a * 5 + r) % 3 == 0));
+                }
+            }
+            let mut store = ObsStore::new(&layout);
+            let slots: Vec<usize> = (0..lasts.len()).map(|r| store.insert(&src, r)).collect();
+            let mut out = ObsBatch::new(&layout);
+            out.resize(1);
+            for (pick, scribble) in reads {
+                let r = pick % lasts.len();
+                if scribble {
+                    out.mask_mut(0).unwrap().fill(true);
+                }
+                store.read(slots[r], &mut out, 0);
+                prop_assert_eq!(out.mask(0), src.mask(r));
+                let end = out.legal_end(0);
+                prop_assert!(lasts[r].is_none_or(|l| l < end));
+                prop_assert!(out.mask(0).unwrap()[end..].iter().all(|l| !l));
             }
         }
     }
