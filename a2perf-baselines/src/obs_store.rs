@@ -545,6 +545,7 @@ impl ObsStore {
     }
 
     /// Decodes the action mask of `slot` into row `row` of `out` (nothing without a mask).
+    ///
     /// Only the words up to the last legal action's are decoded; the batch marks the rest
     /// illegal where its last read through here did not ([`ObsBatch::write_mask_trimmed`]).
     pub(crate) fn read_mask(&self, slot: usize, out: &mut ObsBatch, row: usize) {
