@@ -146,6 +146,31 @@ impl Rows {
     }
 }
 
+/// Row `row`'s entry of a per-row watermark list (growing it with "not known", `u32::MAX`).
+fn mark(marks: &mut Vec<u32>, row: usize) -> &mut u32 {
+    if marks.len() <= row {
+        marks.resize(row + 1, u32::MAX);
+    }
+    &mut marks[row]
+}
+
+/// Writes the first `n` places of `row` by `fill` and `blank` after them, clearing only up to
+/// `known` (where the last such write of this row ended its values, `u32::MAX` when not known;
+/// the places after it still hold `blank`); then records `n` there.
+fn fill_trimmed<T: Copy>(
+    row: &mut [T],
+    n: usize,
+    blank: T,
+    known: &mut u32,
+    fill: impl FnOnce(&mut [T]),
+) {
+    let n = n.min(row.len());
+    let clear_to = (*known as usize).min(row.len()).max(n);
+    fill(&mut row[..n]);
+    row[n..clear_to].fill(blank);
+    *known = n as u32;
+}
+
 /// A batch of observations: for each tensor a `[rows, dim]` buffer (`f32` or exact `i32`, see the
 /// module documentation), and a `[rows, n]` action mask for discrete spaces (all `true` when the
 /// environment gives none).
@@ -265,28 +290,14 @@ impl ObsBatch {
         if d == 0 {
             return;
         }
-        let nz = nz.min(d);
         if self.zero_from.len() != self.dims.len() {
             self.zero_from = vec![Vec::new(); self.dims.len()];
         }
-        let known = &mut self.zero_from[i];
-        if known.len() <= row {
-            known.resize(row + 1, u32::MAX);
-        }
-        let clear_to = (known[row] as usize).min(d).max(nz);
+        let known = mark(&mut self.zero_from[i], row);
         match &mut self.data[i] {
-            Rows::F32(v) => {
-                let r = &mut v[row * d..(row + 1) * d];
-                floats(&mut r[..nz]);
-                r[nz..clear_to].fill(0.0);
-            }
-            Rows::I32(v) => {
-                let r = &mut v[row * d..(row + 1) * d];
-                ints(&mut r[..nz]);
-                r[nz..clear_to].fill(0);
-            }
+            Rows::F32(v) => fill_trimmed(&mut v[row * d..(row + 1) * d], nz, 0.0, known, floats),
+            Rows::I32(v) => fill_trimmed(&mut v[row * d..(row + 1) * d], nz, 0, known, ints),
         }
-        known[row] = nz as u32;
     }
 
     /// Forgets what [`write_mask_trimmed`](Self::write_mask_trimmed) knew of row `row`'s mask.
@@ -316,15 +327,14 @@ impl ObsBatch {
         if w == 0 {
             return;
         }
-        let n = n.min(w);
-        if self.illegal_from.len() <= row {
-            self.illegal_from.resize(row + 1, u32::MAX);
-        }
-        let clear_to = (self.illegal_from[row] as usize).min(w).max(n);
-        let m = &mut self.mask[row * w..(row + 1) * w];
-        fill(&mut m[..n]);
-        m[n..clear_to].fill(false);
-        self.illegal_from[row] = n as u32;
+        let known = mark(&mut self.illegal_from, row);
+        fill_trimmed(
+            &mut self.mask[row * w..(row + 1) * w],
+            n,
+            false,
+            known,
+            fill,
+        );
     }
 
     /// An index from which every action of row `row`'s mask is known illegal: where the last
@@ -377,6 +387,7 @@ impl ObsBatch {
     /// Overwrites row `row` (which must be `< len`) with `obs`. A float tensor must be `float32`;
     /// an integer tensor `int32` or `uint8`.
     pub fn write_row(&mut self, row: usize, obs: &Observation) -> Result<(), PolicyError> {
+        self.forget_zeros(None, row);
         let single = self.dims.len() == 1 && obs.tensors.len() == 1;
         for (i, name) in self.names.iter().enumerate() {
             let t = if single {
@@ -394,9 +405,6 @@ impl ObsBatch {
                 )));
             }
             let width = self.widths[i];
-            if let Some(z) = self.zero_from.get_mut(i).and_then(|z| z.get_mut(row)) {
-                *z = u32::MAX;
-            }
             let at = row * width..(row + 1) * width;
             let s = ..width;
             match (&mut self.data[i], &t.data) {

@@ -360,6 +360,11 @@ impl Stored {
         }
     }
 
+    /// The length of slot `slot`'s row without its trailing zeros (0 with nothing stored).
+    fn nz_len(&self, slot: usize, dim: usize) -> u32 {
+        self.at(slot, dim).map_or(0, |(c, at)| c.nz_len(at, dim)) as u32
+    }
+
     /// Stores `src` as slot `slot`'s row, `slots` being the number of slots (free ones
     /// included). A row that differs from the shared one turns the tensor into a per-slot
     /// column, every other slot keeping the shared row.
@@ -463,7 +468,7 @@ impl ObsStore {
             if nz.len() < slots {
                 nz.resize(slots, 0);
             }
-            nz[slot] = t.at(slot, *d).map_or(0, |(c, at)| c.nz_len(at, *d)) as u32;
+            nz[slot] = t.nz_len(slot, *d);
         }
         if let Some(m) = src.mask(row) {
             let bits = &mut self.mask[slot * self.words..(slot + 1) * self.words];
@@ -670,11 +675,7 @@ impl ObsStore {
         let nz = tensors
             .iter()
             .zip(&dims)
-            .map(|(t, &d)| {
-                (0..slots)
-                    .map(|slot| t.at(slot, d).map_or(0, |(c, at)| c.nz_len(at, d)) as u32)
-                    .collect()
-            })
+            .map(|(t, &d)| (0..slots).map(|slot| t.nz_len(slot, d)).collect())
             .collect();
         let mut store = ObsStore {
             dims,
