@@ -307,6 +307,9 @@ pub struct AnalyticalScratch {
     pos: Vec<[f64; 2]>,
     g_wl: Vec<[f64; 2]>,
     g_den: Vec<[f64; 2]>,
+    /// Both terms' gradients at the start, evaluated once for the three uses there.
+    g_wl0: Vec<[f64; 2]>,
+    g_den0: Vec<[f64; 2]>,
     u_k: Vec<[f64; 2]>,
     v_k: Vec<[f64; 2]>,
     g_k: Vec<[f64; 2]>,
@@ -491,6 +494,8 @@ pub fn place_analytical(
     for v in [
         &mut s.g_wl,
         &mut s.g_den,
+        &mut s.g_wl0,
+        &mut s.g_den0,
         &mut s.u_k,
         &mut s.v_k,
         &mut s.g_k,
@@ -532,9 +537,13 @@ pub fn place_analytical(
         }
     }
     prob.clamp(&mut s.pos);
+    // The start's terms serve three uses (the first step's estimate, the density weight and
+    // the first iteration's gradient): evaluated once, kept, and put back, which gives the
+    // same bits as evaluating them again (same point, same γ).
     // DREAMPlace estimates the first step with the density weight still 0.
-    let lr = {
+    let (lr, at_start) = {
         prob.obj_grad(&s.pos, &mut s.g_k);
+        let at_start = prob.keep_terms(&mut s.g_wl0, &mut s.g_den0);
         for ((v, p), g) in s.v_k1.iter_mut().zip(&s.pos).zip(&s.g_k) {
             *v = [
                 p[0] - params.learning_rate * g[0],
@@ -542,10 +551,12 @@ pub fn place_analytical(
             ];
         }
         prob.obj_grad(&s.v_k1, &mut s.g_k1);
-        ratio(norm_diff(&s.pos, &s.v_k1), norm_diff(&s.g_k, &s.g_k1), 0.0)
+        let lr = ratio(norm_diff(&s.pos, &s.v_k1), norm_diff(&s.g_k, &s.g_k1), 0.0);
+        (lr, at_start)
     };
     // The density weight: 8e-5 × |∇WL|₁ / |∇D|₁ at the start.
-    prob.init_lambda(&s.pos, params.density_weight);
+    prob.put_terms(&s.g_wl0, &s.g_den0, at_start);
+    prob.init_lambda(params.density_weight);
     let base_gamma = params.gamma * (bx + by);
     let mut report = AnalyticalReport {
         movable: m,
@@ -573,7 +584,8 @@ pub fn place_analytical(
             started = true;
             s.u_k.copy_from_slice(&s.pos);
             s.v_k.copy_from_slice(&s.pos);
-            prob.obj_grad(&s.v_k, &mut s.g_k);
+            prob.put_terms(&s.g_wl0, &s.g_den0, at_start);
+            prob.combine(&mut s.g_k);
             for ((v, p), g) in s.v_k1.iter_mut().zip(&s.v_k).zip(&s.g_k) {
                 *v = [p[0] - lr * g[0], p[1] - lr * g[1]];
             }
@@ -762,6 +774,26 @@ impl Problem<'_> {
     /// The objective's preconditioned gradient at `pos`.
     fn obj_grad(&mut self, pos: &[[f64; 2]], grad: &mut [[f64; 2]]) {
         self.terms(pos);
+        self.combine(grad);
+    }
+
+    /// Copies the last evaluation's gradients of both terms into `wl` and `den`; returns its
+    /// metric.
+    fn keep_terms(&self, wl: &mut [[f64; 2]], den: &mut [[f64; 2]]) -> Metric {
+        wl.copy_from_slice(self.g_wl);
+        den.copy_from_slice(self.g_den);
+        self.last
+    }
+
+    /// Makes `wl`, `den` and `metric` (from [`Problem::keep_terms`]) the last evaluation again.
+    fn put_terms(&mut self, wl: &[[f64; 2]], den: &[[f64; 2]], metric: Metric) {
+        self.g_wl.copy_from_slice(wl);
+        self.g_den.copy_from_slice(den);
+        self.last = metric;
+    }
+
+    /// The preconditioned gradient of the objective from the last evaluation's terms.
+    fn combine(&self, grad: &mut [[f64; 2]]) {
         let lambda = self.lambda;
         for ((((g, gw), gd), pw), a) in grad
             .iter_mut()
@@ -778,9 +810,9 @@ impl Problem<'_> {
         }
     }
 
-    /// λ = `weight · |∇WL|₁ / |∇E|₁` at `pos` (DREAMPlace's `initialize_density_weight`).
-    fn init_lambda(&mut self, pos: &[[f64; 2]], weight: f64) {
-        self.terms(pos);
+    /// λ = `weight · |∇WL|₁ / |∇E|₁` from the last evaluation's terms (DREAMPlace's
+    /// `initialize_density_weight`, at the start).
+    fn init_lambda(&mut self, weight: f64) {
         let l1 = |g: &[[f64; 2]]| g.iter().map(|v| v[0].abs() + v[1].abs()).sum::<f64>();
         let (gw, gd) = (l1(self.g_wl), l1(self.g_den));
         self.lambda = ratio(weight * gw, gd, weight);
