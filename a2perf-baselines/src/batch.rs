@@ -4,6 +4,7 @@
 //! layers read, and what observation normalisation shifts), integer tensors (`int32`, and `uint8`
 //! widened) are exact `i32` rows, which embedding lookups read directly.
 
+use a2perf_core::copy::copy_slice;
 use a2perf_core::{DType, EnvSpec, Observation, PolicyError, Space, TensorData};
 use serde::{Deserialize, Serialize};
 
@@ -139,8 +140,8 @@ impl Rows {
     /// Copies `src[from..from + n]` to `self[at..at + n]` (same kinds, by construction).
     fn copy_range(&mut self, at: usize, src: &Rows, from: usize, n: usize) {
         match (self, src) {
-            (Rows::F32(d), Rows::F32(s)) => d[at..at + n].copy_from_slice(&s[from..from + n]),
-            (Rows::I32(d), Rows::I32(s)) => d[at..at + n].copy_from_slice(&s[from..from + n]),
+            (Rows::F32(d), Rows::F32(s)) => copy_slice(&mut d[at..at + n], &s[from..from + n]),
+            (Rows::I32(d), Rows::I32(s)) => copy_slice(&mut d[at..at + n], &s[from..from + n]),
             _ => {}
         }
     }
@@ -408,8 +409,8 @@ impl ObsBatch {
             let at = row * width..(row + 1) * width;
             let s = ..width;
             match (&mut self.data[i], &t.data) {
-                (Rows::F32(d), TensorData::F32(v)) => d[at].copy_from_slice(&v[s]),
-                (Rows::I32(d), TensorData::I32(v)) => d[at].copy_from_slice(&v[s]),
+                (Rows::F32(d), TensorData::F32(v)) => copy_slice(&mut d[at], &v[s]),
+                (Rows::I32(d), TensorData::I32(v)) => copy_slice(&mut d[at], &v[s]),
                 (Rows::I32(d), TensorData::U8(v)) => d[at]
                     .iter_mut()
                     .zip(&v[s])
@@ -454,8 +455,10 @@ impl ObsBatch {
         let w = self.mask_width;
         if w > 0 {
             self.forget_illegal(row);
-            self.mask[row * w..(row + 1) * w]
-                .copy_from_slice(&src.mask[src_row * w..(src_row + 1) * w]);
+            copy_slice(
+                &mut self.mask[row * w..(row + 1) * w],
+                &src.mask[src_row * w..(src_row + 1) * w],
+            );
         }
     }
 

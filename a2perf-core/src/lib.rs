@@ -20,6 +20,7 @@
 //! - [`resume`]: resume points, so that an interrupted training run continues exactly where it
 //!   stopped ([`TrainingContext::take_resume_state`], [`TrainingContext::progress_resumable`]).
 //! - [`alloc_count`]: a counting global allocator, to check that hot paths allocate nothing.
+//! - [`copy`]: slice copies that avoid the C library's slow `rep movsb` case.
 //! - [`crew`]: worker threads for lockstep jobs (each part pinned to one thread, spin-then-sleep
 //!   between jobs), which the Python package's vector environments step with.
 //!
@@ -40,6 +41,7 @@ pub mod bytes;
 pub mod cancel;
 pub mod checkpoint;
 pub mod config;
+pub mod copy;
 pub mod crew;
 pub mod curve;
 pub mod env;

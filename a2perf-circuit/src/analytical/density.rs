@@ -27,6 +27,7 @@
 
 use std::sync::Arc;
 
+use a2perf_core::copy::copy_slice;
 use rustdct::rustfft::num_complex::Complex;
 use rustdct::rustfft::{Fft, FftPlanner};
 
@@ -330,7 +331,8 @@ impl<F: Real> Electrostatics<F> {
         full: bool,
     ) -> DensityStats {
         let (bx, by) = (self.bx, self.by);
-        self.map.copy_from_slice(&self.fixed);
+        // Not `copy_from_slice`: the two maps are allocated one after the other (a2perf_core::copy).
+        copy_slice(&mut self.map, &self.fixed);
         self.wx.clear();
         self.wy.clear();
         self.foot.clear();
@@ -376,7 +378,9 @@ impl<F: Real> Electrostatics<F> {
         }
         let zero = F::zero();
         for (r, row) in self.rows_in.iter_mut().zip(self.map.chunks_exact(self.nx)) {
-            *r = row.iter().any(|&q| q != zero);
+            // A fold, not `any`: without the early exit the test vectorizes (most rows of a
+            // small netlist's map are empty, and were scanned one bin at a time).
+            *r = row.iter().fold(false, |a, &q| a | (q != zero));
         }
         self.solve();
         let cap = target_density * bx * by;
