@@ -454,6 +454,80 @@ pub struct PlacementCost {
     pub(crate) scratch_f64: Vec<f64>,
 }
 
+/// A source cell's share of routing demand `raw` spread over `n` cells after normalising by
+/// `routes`; zero for an empty cell, which the reference skips (adding `+0.0` to a sum that
+/// started at `+0.0` leaves it unchanged, so skipping and adding agree bit for bit).
+#[inline(always)]
+fn spread_share(raw: f64, routes: f64, n: usize) -> f64 {
+    if raw == 0.0 {
+        0.0
+    } else {
+        (raw / routes) / n as f64
+    }
+}
+
+/// circuit_training's smoothed routing demand: the vertical demand `v_net` (column-major,
+/// `col·rows + row`) normalised by `vr` and spread along each row over `±k` columns, into
+/// `v_out`; the horizontal demand `h_net` (row-major) normalised by `hr` and spread along each
+/// column over `±k` rows, into `h_out` (both row-major). Each source's share is split evenly
+/// over the cells of its window that exist.
+///
+/// Each cell's sum runs over its sources in ascending order from `+0.0`, as the reference's
+/// loop over sources adds them, so the result is the same bit for bit; it is written as one
+/// shifted slice addition per window offset (a whole row at a time for `h`), which vectorizes.
+fn smooth_demand(
+    (v_net, h_net): (&[f64], &[f64]),
+    (cols, rows, k): (usize, usize, usize),
+    (vr, hr): (f64, f64),
+    val: &mut Vec<f64>,
+    (v_out, h_out): (&mut [f64], &mut [f64]),
+) {
+    val.clear();
+    val.resize(cols, 0.0);
+    for r in 0..rows {
+        for (c, v) in val.iter_mut().enumerate() {
+            let n = (c + k).min(cols - 1) - c.saturating_sub(k) + 1;
+            *v = spread_share(v_net[c * rows + r], vr, n);
+        }
+        let o = &mut v_out[r * cols..(r + 1) * cols];
+        o.fill(0.0);
+        // Target `t` takes source `t + j − k`: ascending sources for ascending `j`.
+        for j in 0..=2 * k {
+            let (s, right) = if j <= k {
+                (k - j, true)
+            } else {
+                (j - k, false)
+            };
+            if s >= cols {
+                continue;
+            }
+            let (o, v) = if right {
+                (&mut o[s..], &val[..cols - s])
+            } else {
+                (&mut o[..cols - s], &val[s..])
+            };
+            for (o, v) in o.iter_mut().zip(v) {
+                *o += v;
+            }
+        }
+    }
+    val.clear();
+    val.extend((0..rows).flat_map(|r| {
+        let n = (r + k).min(rows - 1) - r.saturating_sub(k) + 1;
+        h_net[r * cols..(r + 1) * cols]
+            .iter()
+            .map(move |&raw| spread_share(raw, hr, n))
+    }));
+    h_out.fill(0.0);
+    for (t, o) in h_out.chunks_exact_mut(cols).enumerate() {
+        for s in t.saturating_sub(k)..(t + k + 1).min(rows) {
+            for (o, v) in o.iter_mut().zip(&val[s * cols..(s + 1) * cols]) {
+                *o += v;
+            }
+        }
+    }
+}
+
 /// Mean of the `k` largest values (sequential sum in descending order, like the reference);
 /// `k == 0` → max.
 fn top_mean(values: &[f64], frac: f64, buf: &mut Vec<f64>) -> f64 {
@@ -1379,38 +1453,15 @@ impl PlacementCost {
         let vr = g.gw * self.settings.vroutes_per_micron;
         let hr = g.gh * self.settings.hroutes_per_micron;
         let k = self.settings.smooth_range.floor() as usize;
-        self.h_tot.iter_mut().for_each(|v| *v = 0.0);
-        self.v_tot.iter_mut().for_each(|v| *v = 0.0);
-        for r in 0..g.rows {
-            for c in 0..g.cols {
-                let raw = self.v_net[c * g.rows + r];
-                if raw == 0.0 {
-                    continue;
-                }
-                let lp = c.saturating_sub(k);
-                let rp = (c + k).min(g.cols - 1);
-                let val = (raw / vr) / (rp - lp + 1) as f64;
-                for t in &mut self.v_tot[r * g.cols + lp..=r * g.cols + rp] {
-                    *t += val;
-                }
-            }
-        }
-        for r in 0..g.rows {
-            for c in 0..g.cols {
-                let raw = self.h_net[r * g.cols + c];
-                if raw == 0.0 {
-                    continue;
-                }
-                let lp = r.saturating_sub(k);
-                let up = (r + k).min(g.rows - 1);
-                let val = (raw / hr) / (up - lp + 1) as f64;
-                let mut i = lp * g.cols + c;
-                for _ in lp..=up {
-                    self.h_tot[i] += val;
-                    i += g.cols;
-                }
-            }
-        }
+        let mut val = std::mem::take(&mut self.scratch_f64);
+        smooth_demand(
+            (&self.v_net, &self.h_net),
+            (g.cols, g.rows, k),
+            (vr, hr),
+            &mut val,
+            (&mut self.v_tot, &mut self.h_tot),
+        );
+        self.scratch_f64 = val;
         for (t, m) in self.v_tot.iter_mut().zip(&self.v_macro) {
             *t += m;
         }
@@ -1575,5 +1626,125 @@ impl PlacementCost {
             ];
             overlap(b, me) <= 0.0
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// circuit_training's smoothing as it reads: each non-empty source adds its share to the
+    /// cells of its window, sources in row-major order (the `congestion_maps` of before).
+    fn smooth_reference(
+        v_net: &[f64],
+        h_net: &[f64],
+        (cols, rows, k): (usize, usize, usize),
+        (vr, hr): (f64, f64),
+    ) -> (Vec<f64>, Vec<f64>) {
+        let (mut v_tot, mut h_tot) = (vec![0.0; cols * rows], vec![0.0; cols * rows]);
+        for r in 0..rows {
+            for c in 0..cols {
+                let raw = v_net[c * rows + r];
+                if raw == 0.0 {
+                    continue;
+                }
+                let (lp, rp) = (c.saturating_sub(k), (c + k).min(cols - 1));
+                let val = (raw / vr) / (rp - lp + 1) as f64;
+                for t in &mut v_tot[r * cols + lp..=r * cols + rp] {
+                    *t += val;
+                }
+            }
+        }
+        for r in 0..rows {
+            for c in 0..cols {
+                let raw = h_net[r * cols + c];
+                if raw == 0.0 {
+                    continue;
+                }
+                let (lp, up) = (r.saturating_sub(k), (r + k).min(rows - 1));
+                let val = (raw / hr) / (up - lp + 1) as f64;
+                for rr in lp..=up {
+                    h_tot[rr * cols + c] += val;
+                }
+            }
+        }
+        (v_tot, h_tot)
+    }
+
+    /// Demand values as routing leaves them: mostly empty cells, sums of net weights, and the
+    /// tiny residues (either sign, and `-0.0`) that incremental removals leave behind.
+    fn demand() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            4 => Just(0.0),
+            1 => Just(-0.0),
+            4 => 0.0f64..50.0,
+            1 => -1e-12f64..1e-12,
+            1 => Just(1e-320),
+            1 => Just(-1e-320),
+        ]
+    }
+
+    #[test]
+    fn floor_i64_is_the_saturated_floor() {
+        let reference = |v: f64| v.floor().clamp(-1e12, 1e12) as i64;
+        for v in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            -1.5,
+            1e12,
+            1e12 + 0.5,
+            -1e12,
+            -1e12 - 0.5,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::MIN_POSITIVE,
+            -f64::MIN_POSITIVE,
+            4_503_599_627_370_495.5,
+        ] {
+            assert_eq!(floor_i64(v), reference(v), "{v}");
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+
+        #[test]
+        fn floor_i64_matches_floor_clamp_cast(v in proptest::num::f64::ANY) {
+            prop_assert_eq!(floor_i64(v), v.floor().clamp(-1e12, 1e12) as i64);
+        }
+
+        /// The vectorized smoothing equals the reference's loops bit for bit.
+        #[test]
+        fn smoothing_matches_the_reference_loops_bit_for_bit(
+            (cols, rows, nets) in (1usize..40, 1usize..40).prop_flat_map(|(c, r)| {
+                (Just(c), Just(r), proptest::collection::vec((demand(), demand()), c * r))
+            }),
+            k in 0usize..12,
+            vr in 0.1f64..20.0,
+            hr in 0.1f64..20.0,
+        ) {
+            let (v_net, h_net): (Vec<f64>, Vec<f64>) = nets.into_iter().unzip();
+            let (v_ref, h_ref) = smooth_reference(&v_net, &h_net, (cols, rows, k), (vr, hr));
+            let (mut v_tot, mut h_tot, mut val) =
+                (vec![f64::NAN; cols * rows], vec![f64::NAN; cols * rows], Vec::new());
+            smooth_demand(
+                (&v_net, &h_net),
+                (cols, rows, k),
+                (vr, hr),
+                &mut val,
+                (&mut v_tot, &mut h_tot),
+            );
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&v_tot), bits(&v_ref));
+            prop_assert_eq!(bits(&h_tot), bits(&h_ref));
+        }
     }
 }
