@@ -432,7 +432,7 @@ impl ObsBatch {
             self.forget_illegal(row);
             let m = &mut self.mask[row * w..(row + 1) * w];
             match &obs.action_mask {
-                Some(src) if src.len() == w => m.copy_from_slice(src),
+                Some(src) if src.len() == w => copy_slice(m, src),
                 Some(src) => {
                     return Err(PolicyError::BadObservation(format!(
                         "action mask has {} entries, the action space has {w}",
