@@ -62,6 +62,9 @@ pub struct Electrostatics<F: Real = f64> {
     pad: Vec<F>,
     /// The partner of the last row when `ny` is odd (a row of zeros).
     zeros: Vec<F>,
+    /// A pair of rows' DCT-IIs along x, `[A_0..A_nx | B_0..B_nx]`, before they are scattered
+    /// into the pass along y.
+    coef: Vec<F>,
     /// Every movable object's smoothed shares of the bins in x and in y (see
     /// [`smooth_weights`]), computed once per evaluation for the deposit and the gradient.
     wx: Vec<F>,
@@ -222,6 +225,7 @@ impl<F: Real> Electrostatics<F> {
             psi: vec![F::zero(); nx * ny],
             pad: vec![F::zero(); nx],
             zeros: vec![F::zero(); nx],
+            coef: vec![F::zero(); 2 * nx],
             wx: Vec::new(),
             wy: Vec::new(),
             foot: Vec::new(),
@@ -480,13 +484,18 @@ impl<F: Real> Electrostatics<F> {
         if !px.is_empty() {
             self.tx.forward.process_with_scratch(px, scratch);
         }
+        let (ca, cb) = self.coef.split_at_mut(nx);
         let mut next = pairs.iter().zip(px.chunks_exact(nx)).peekable();
         for j in 0..ny.div_ceil(2) {
             match next.next_if(|(p, _)| **p == j) {
-                Some((_, z)) => self.tx.unpack_forward(z, |k, a, b| {
-                    put_half(py, pad, ny, k, 2 * j, a);
-                    put_half(py, pad, ny, k, 2 * j + 1, b);
-                }),
+                Some((_, z)) => {
+                    // The arithmetic first, in a loop of its own, then the scatter.
+                    self.tx.unpack_forward(z, ca, cb);
+                    for (k, (&a, &b)) in ca.iter().zip(&*cb).enumerate() {
+                        put_half(py, pad, ny, k, 2 * j, a);
+                        put_half(py, pad, ny, k, 2 * j + 1, b);
+                    }
+                }
                 None => {
                     for k in 0..nx {
                         put_half(py, pad, ny, k, 2 * j, zero);
@@ -661,6 +670,16 @@ fn deposit<F: Real>(
     }
 }
 
+/// [`PairDct::dct2_coefficient`] with its `cos(πk/2N)/2`, `sin(πk/2N)/2` given: the pair's
+/// DCT-IIs `(A_k, B_k)` from coefficients `p = k` and `q = N − k` of its forward FFT.
+#[inline(always)]
+fn dct2_of<F: Real>(c: F, s: F, p: Complex<F>, q: Complex<F>) -> (F, F) {
+    (
+        c * (p.re + q.re) + s * (p.im - q.im),
+        c * (p.im + q.im) - s * (p.re - q.re),
+    )
+}
+
 /// Two real DCTs (rustdct's unnormalized DCT-II, `X_k = Σ x_n cos(πk(2n+1)/2N)`, and its
 /// DCT-III, `x_n = X_0/2 + Σ_{k≥1} X_k cos(πk(2n+1)/2N)`) of length `N` by one complex FFT
 /// of length `N` (Makhoul's reordering; the two real sequences as the real and imaginary
@@ -706,14 +725,23 @@ impl<F: Real> PairDct<F> {
         }
     }
 
-    /// The two DCT-IIs `(A_k, B_k)` from the forward FFT `z` of a packed pair, to `out`.
+    /// The two DCT-IIs `A_k`, `B_k` from the forward FFT `z` of a packed pair, into `a` and
+    /// `b`. Coefficient `k` reads `z[k]` and `z[N − k]`: one loop over `k` with the second
+    /// read backwards and nothing else in it (the scatter into the pass along y follows).
     #[inline(always)]
-    fn unpack_forward(&self, z: &[Complex<F>], mut out: impl FnMut(usize, F, F)) {
-        let (a, b) = self.dct2_coefficient(0, z[0], z[0]);
-        out(0, a, b);
-        for k in 1..self.n {
-            let (a, b) = self.dct2_coefficient(k, z[k], z[self.n - k]);
-            out(k, a, b);
+    fn unpack_forward(&self, z: &[Complex<F>], a: &mut [F], b: &mut [F]) {
+        let n = self.n;
+        (a[0], b[0]) = self.dct2_coefficient(0, z[0], z[0]);
+        let (c, s) = (&self.half_cos[1..n], &self.half_sin[1..n]);
+        for (((((a, b), p), q), &c), &s) in a[1..n]
+            .iter_mut()
+            .zip(&mut b[1..n])
+            .zip(&z[1..n])
+            .zip(z[1..n].iter().rev())
+            .zip(c)
+            .zip(s)
+        {
+            (*a, *b) = dct2_of(c, s, *p, *q);
         }
     }
 
@@ -744,11 +772,7 @@ impl<F: Real> PairDct<F> {
     /// The pair's DCT-IIs `(A_k, B_k)` from coefficients `k` and `N − k` of its forward FFT.
     #[inline(always)]
     fn dct2_coefficient(&self, k: usize, p: Complex<F>, q: Complex<F>) -> (F, F) {
-        let (c, s) = (self.half_cos[k], self.half_sin[k]);
-        (
-            c * (p.re + q.re) + s * (p.im - q.im),
-            c * (p.im + q.im) - s * (p.re - q.re),
-        )
+        dct2_of(self.half_cos[k], self.half_sin[k], p, q)
     }
 
     /// The forward FFT `z` of a packed pair turned, in place, into the packed spectrum of the
@@ -861,10 +885,10 @@ mod tests {
             let (mut da, mut db) = (a.clone(), b.clone());
             planner.plan_dct2(n).process_dct2(&mut da);
             planner.plan_dct2(n).process_dct2(&mut db);
-            let mut got = vec![(0.0, 0.0); n];
-            t.unpack_forward(&z, |k, x, y| got[k] = (x, y));
+            let (mut ga, mut gb) = (vec![0.0; n], vec![0.0; n]);
+            t.unpack_forward(&z, &mut ga, &mut gb);
             for k in 0..n {
-                assert!((got[k].0 - da[k]).abs() < 1e-12 && (got[k].1 - db[k]).abs() < 1e-12);
+                assert!((ga[k] - da[k]).abs() < 1e-12 && (gb[k] - db[k]).abs() < 1e-12);
             }
             // DCT-III of (a, b) as spectra.
             t.pack_inverse(&mut z, |k| (a[k], b[k]));
