@@ -85,14 +85,11 @@ fn copy_profile_counts_copies_per_site_and_flags_the_slow_case() {
             Some((b, c, s, f.collect::<Vec<_>>().join(" ")))
         })
         .collect();
-    let site = |name: &str| {
+    let counts = |name: &str| {
         rows.iter()
             .find(|r| r.3.contains(name))
+            .map(|r| (r.0, r.1, r.2))
             .unwrap_or_else(|| panic!("no row for {name}:\n{text}"))
-    };
-    let counts = |name: &str| {
-        let r = site(name);
-        (r.0, r.1, r.2)
     };
     assert_eq!(counts("slow"), (40 * 65536, 40, 40), "{text}");
     assert_eq!(counts("fine"), (25 * 65536, 25, 0), "{text}");

@@ -53,7 +53,9 @@ pub fn copy_slice<T: Copy>(dst: &mut [T], src: &[T]) {
         dst.copy_from_slice(src);
         return;
     }
-    let step = (PIECE_BYTES / std::mem::size_of::<T>().max(1)).max(1);
+    // `T` is not zero-sized here (the copy has more than a piece's bytes); an element larger
+    // than a piece goes alone.
+    let step = (PIECE_BYTES / std::mem::size_of::<T>()).max(1);
     for (d, s) in dst.chunks_mut(step).zip(src.chunks(step)) {
         d.copy_from_slice(s);
     }
